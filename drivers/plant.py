@@ -1,0 +1,103 @@
+"""The truth the emulators speak about: a small plant interface.
+
+An emulator never invents motion. It asks a `Plant` where each sensor is and tells it
+what the valves are doing. The digital twin implements this interface on the physical
+model; `StaticPlant` holds sensors still, for tests and standalone emulators.
+
+Frames: "world" is the EM tracker's frame. Orientations are unit quaternions
+(w, x, y, z) mapping sensor-frame vectors into the world frame (see
+`hydrojet_bench.geometry`).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from hydrojet_bench.geometry import quat_normalize
+
+VALVE_COUNT = 3
+
+
+@dataclass(frozen=True)
+class SensorTruth:
+    """Exact state of one sensor at one instant.
+
+    orientation_in_world: unit quaternion (w, x, y, z), sensor frame -> world frame.
+    position_in_world_m: sensor origin in the world frame, metres.
+    angular_velocity_in_sensor_rad_s: body-frame angular rate, rad/s.
+    linear_acceleration_in_world_m_s2: acceleration of the sensor origin (not including
+        gravity), world frame, m/s^2. Zero for quasistatic motion.
+    """
+
+    orientation_in_world: np.ndarray
+    position_in_world_m: np.ndarray
+    angular_velocity_in_sensor_rad_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    linear_acceleration_in_world_m_s2: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+@runtime_checkable
+class Plant(Protocol):
+    """What every emulator needs from the physical world.
+
+    gravity_in_world_m_s2: gravitational acceleration vector in the world frame (m/s^2),
+        e.g. (0, 0, -9.81) when the tracker's z axis points up.
+    magnetic_field_in_world_ut: Earth's field in the world frame, microtesla.
+    """
+
+    gravity_in_world_m_s2: np.ndarray
+    magnetic_field_in_world_ut: np.ndarray
+
+    def sensor_truth(self, sensor: str, t_s: float) -> SensorTruth:
+        """Exact pose of sensor ``"base"`` or ``"tip"`` at plant time ``t_s`` (s)."""
+        ...
+
+    def apply_valve_duties(self, duties_permille: Sequence[int], t_s: float) -> None:
+        """The valve emulator reports the duty (0-1000 per mille) of each of the three
+        valves whenever it changes, including the watchdog closing them all."""
+        ...
+
+
+class StaticPlant:
+    """Sensors that never move; records every valve change (thread-safe, since emulators
+    may run on their own threads)."""
+
+    def __init__(
+        self,
+        poses: Mapping[str, tuple[Sequence[float], Sequence[float]]] | None = None,
+        gravity_in_world_m_s2: Sequence[float] = (0.0, 0.0, -9.81),
+        magnetic_field_in_world_ut: Sequence[float] = (20.0, 0.0, -45.0),
+    ) -> None:
+        """poses: sensor name -> (orientation (w, x, y, z), position in m). Defaults put the
+        base at the origin and the tip 70 mm along -z (the rod hanging straight down)."""
+        poses = poses or {
+            "base": ((1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
+            "tip": ((1.0, 0.0, 0.0, 0.0), (0.0, 0.0, -0.070)),
+        }
+        self._truth = {
+            name: SensorTruth(quat_normalize(q), np.asarray(p, dtype=float))
+            for name, (q, p) in poses.items()
+        }
+        self.gravity_in_world_m_s2 = np.asarray(gravity_in_world_m_s2, dtype=float)
+        self.magnetic_field_in_world_ut = np.asarray(magnetic_field_in_world_ut, dtype=float)
+        self._lock = threading.Lock()
+        self.valve_history: list[tuple[float, tuple[int, ...]]] = []
+
+    def sensor_truth(self, sensor: str, t_s: float) -> SensorTruth:
+        try:
+            return self._truth[sensor]
+        except KeyError:
+            raise KeyError(f"plant has no sensor {sensor!r}; known: {sorted(self._truth)}") from None
+
+    def apply_valve_duties(self, duties_permille: Sequence[int], t_s: float) -> None:
+        with self._lock:
+            self.valve_history.append((t_s, tuple(int(d) for d in duties_permille)))
+
+    @property
+    def valve_duties_permille(self) -> tuple[int, ...]:
+        with self._lock:
+            return self.valve_history[-1][1] if self.valve_history else (0,) * VALVE_COUNT

@@ -1,0 +1,53 @@
+"""The `hydrojet-bench` command line.
+
+Each subcommand lives in `hydrojet_bench.commands.<name>` and exposes
+`register(subparsers)`, which adds its parser and sets `func`. A `UserError` (or an
+`OSError` on a path the user gave) is printed as one clear line with exit code 2, never
+as a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from rich.console import Console
+
+from . import __version__
+from .errors import UserError
+
+# Order is the order shown in --help.
+COMMAND_MODULES = ("demo",)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="hydrojet-bench",
+        description="Hardware-in-the-loop bench for the HydroJet soft continuum robot.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        importlib.import_module(f"{__package__}.commands.{name}").register(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except UserError as error:
+        Console(stderr=True).print(f"[bold red]error:[/] {error}", highlight=False)
+        return 2
+    except KeyboardInterrupt:
+        Console(stderr=True).print("interrupted")
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,68 @@
+"""Suite-wide test configuration.
+
+* `--rig PROFILE` enables tests marked `rig` (real hardware); they are skipped otherwise.
+* `run_async` runs a coroutine on a fresh event loop and fails the test if it leaves any
+  task running: a leaked task on the bench is a heartbeat or reader nobody will stop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Awaitable, Callable
+from typing import Any, TypeVar
+
+import pytest
+
+T = TypeVar("T")
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--rig",
+        action="store",
+        default=None,
+        metavar="PROFILE",
+        help="run the opt-in hardware tests against the rig described by PROFILE (TOML)",
+    )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if config.getoption("--rig"):
+        return
+    skip = pytest.mark.skip(reason="hardware test: pass --rig PROFILE to run it")
+    for item in items:
+        if "rig" in item.keywords:
+            item.add_marker(skip)
+
+
+@pytest.fixture
+def rig_profile(request: pytest.FixtureRequest) -> str:
+    return request.config.getoption("--rig")
+
+
+def _run_checked(main: Callable[[], Awaitable[T]], timeout_s: float) -> T:
+    async def wrapper() -> T:
+        result = await asyncio.wait_for(main(), timeout_s)
+        # Give cancelled tasks one turn to finish their cleanup before we look.
+        await asyncio.sleep(0)
+        current = asyncio.current_task()
+        leaked = [t for t in asyncio.all_tasks() if t is not current and not t.done()]
+        if leaked:
+            for task in leaked:
+                task.cancel()
+            await asyncio.gather(*leaked, return_exceptions=True)
+            names = ", ".join(sorted(t.get_name() for t in leaked))
+            raise AssertionError(f"test leaked {len(leaked)} running task(s): {names}")
+        return result
+
+    return asyncio.run(wrapper())
+
+
+@pytest.fixture
+def run_async() -> Callable[..., Any]:
+    """`run_async(coroutine_function, timeout_s=10.0)`: run it and check for leaked tasks."""
+
+    def runner(main: Callable[[], Awaitable[T]], timeout_s: float = 10.0) -> T:
+        return _run_checked(main, timeout_s)
+
+    return runner
