@@ -1,0 +1,60 @@
+"""Effects: physics that both models compose, by canonical name or from a user's file."""
+
+from __future__ import annotations
+
+import importlib.util
+import inspect
+import sys
+from pathlib import Path
+
+from ..errors import UserError
+from .base import Effect, EffectParameter, effect_values, qualified_parameter_names
+from .gravity import Gravity
+
+# Canonical library. The analysis work adds jet_gain, jet_misalignment,
+# nonlinear_elasticity, pressure_stiffening, base_compliance, base_hysteresis,
+# sensor_mounting, anisotropic_stiffness and stiffness_profile here.
+LIBRARY: dict[str, type] = {
+    Gravity.name: Gravity,
+}
+
+__all__ = ["Effect", "EffectParameter", "LIBRARY", "effect_values", "load_effect",
+           "qualified_parameter_names"]
+
+
+def load_effect(spec: str) -> Effect:
+    """An effect by canonical name (``gravity``) or from a file (``path/to/file.py:ClassName``)."""
+    if spec in LIBRARY:
+        return LIBRARY[spec]()
+    if ":" not in spec:
+        raise UserError(f"unknown effect {spec!r}; known effects: {', '.join(sorted(LIBRARY))}, "
+                        "or give a file as path/to/my_effect.py:ClassName")
+    path_text, _, class_name = spec.rpartition(":")
+    path = Path(path_text)
+    if not path.is_file():
+        raise UserError(f"effect {spec!r}: file {path} does not exist")
+    module_name = f"hydrojet_user_effect_{abs(hash(path.resolve()))}"
+    module_spec = importlib.util.spec_from_file_location(module_name, path)
+    if module_spec is None or module_spec.loader is None:
+        raise UserError(f"effect {spec!r}: {path} is not a Python file")
+    module = importlib.util.module_from_spec(module_spec)
+    sys.modules[module_name] = module
+    try:
+        module_spec.loader.exec_module(module)
+    except Exception as error:  # the user's code: report, don't crash with a traceback
+        raise UserError(f"effect {spec!r}: importing {path} failed: {type(error).__name__}: {error}") from error
+    cls = getattr(module, class_name, None)
+    if cls is None or not inspect.isclass(cls):
+        raise UserError(f"effect {spec!r}: {path} defines no class {class_name!r}")
+    try:
+        effect = cls()
+    except Exception as error:
+        raise UserError(f"effect {spec!r}: {class_name}() failed: {type(error).__name__}: {error}") from error
+    missing = [attr for attr in ("name", "explanation", "parameters", "uses_actuation", "apply")
+               if not hasattr(effect, attr)]
+    if missing:
+        raise UserError(f"effect {spec!r}: class {class_name} lacks {', '.join(missing)} "
+                        "(see hydrojet_bench.effects.base.Effect)")
+    if not all(isinstance(p, EffectParameter) for p in effect.parameters):
+        raise UserError(f"effect {spec!r}: {class_name}.parameters must be EffectParameter items")
+    return effect

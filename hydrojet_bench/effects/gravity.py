@@ -1,0 +1,38 @@
+"""Self-weight of the soft body and weight of the tip capsule."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import ClassVar
+
+import numpy as np
+
+from ..models.problem import RodProblem
+from .base import EffectParameter
+
+
+class Gravity:
+    name: ClassVar[str] = "gravity"
+    explanation: ClassVar[str] = (
+        "The elastomer body weighs rho*A*g per unit length and the capsule hangs its weight "
+        "m*g at its centre of mass, ahead of the rod tip. Both pull the rod towards the "
+        "floor whatever the jets do, so the error they cause depends on how the robot is "
+        "oriented relative to gravity: largest when the rod bends across the vertical, "
+        "and in the same direction for every jet. weight_scale corrects the nominal "
+        "masses (water in the lumens, a heavier capsule)."
+    )
+    parameters: ClassVar[tuple[EffectParameter, ...]] = (
+        EffectParameter("weight_scale", 1.0, 0.0, 3.0, "1",
+                        "multiplies the nominal rod and capsule weight"),
+    )
+    uses_actuation: ClassVar[bool] = False
+
+    def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
+        params = problem.params
+        gravity = np.asarray(params.gravity_in_base_m_s2) * values["weight_scale"]
+        problem.distributed_force_in_base_n_m = (
+            problem.distributed_force_in_base_n_m + params.rod.mass_per_length_kg_m * gravity
+        )
+        if params.capsule.mass_kg > 0.0:
+            problem.add_tip_dead_force(params.capsule.mass_kg * gravity,
+                                       np.asarray(params.capsule.center_of_mass_in_tip_m))

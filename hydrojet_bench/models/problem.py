@@ -1,0 +1,108 @@
+"""The rod problem: everything a solve needs, in SI units, as plain arrays.
+
+A model builds a `RodProblem` from the parameters and the jet forces, lets each enabled
+effect edit it, then hands it to the numerical kernel. Effects never see the kernel: this
+class is the whole vocabulary of physics they can change, which is what lets one effect
+work unchanged in both the Cosserat and the PRB model:
+
+* constitutive law: bending/torsional stiffness and intrinsic curvature as functions of
+  arc length (sampled on ``arc_length_m``), plus a cubic strain-stiffening coefficient;
+* distributed loads: force per length (base frame) and moment per length (body frame);
+* tip loads: follower force/moment (tip frame, e.g. the jets and w_d) and dead forces
+  applied at a point given in the tip frame (e.g. the capsule's weight);
+* actuation map: jet gains and the jet-ring angle;
+* base boundary: a rotational clamp compliance, optionally with play (hysteresis), which
+  makes the solve depend on the previous clamp rotation;
+* measurement: fixed mounting rotations of the base and tip sensors.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..params import ModelParameters, actuation_matrix
+
+
+@dataclass
+class RodProblem:
+    """Mutable description of one static solve. Arrays indexed by sample point have
+    ``len(arc_length_m)`` rows; the model chooses the sample points."""
+
+    params: ModelParameters
+    jet_forces_n: np.ndarray
+    arc_length_m: np.ndarray
+    # Constitutive law, at each sample point.
+    bending_stiffness_x_nm2: np.ndarray
+    bending_stiffness_y_nm2: np.ndarray
+    torsional_stiffness_nm2: np.ndarray
+    intrinsic_curvature_in_body_1_m: np.ndarray
+    # m_b = K (u - u0 + beta |u_b - u0_b|^2 (u_b - u0_b)) on the bending components (m^2).
+    cubic_stiffening_m2: float = 0.0
+    # Distributed loads, at each sample point.
+    distributed_force_in_base_n_m: np.ndarray = field(default=None)  # type: ignore[assignment]
+    distributed_moment_in_body_nm_m: np.ndarray = field(default=None)  # type: ignore[assignment]
+    # Actuation map: tip-frame force = A(jet_ring_angle_rad) @ (jet_gains * jet_forces_n).
+    jet_gains: np.ndarray = field(default_factory=lambda: np.ones(3))
+    jet_ring_angle_rad: float = 0.0
+    # Tip loads besides the jets.
+    tip_follower_force_in_tip_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    tip_follower_moment_in_tip_nm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    tip_dead_force_in_base_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    tip_dead_moment_in_base_nm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # Sum of outer(offset_in_tip, force_in_base) over dead forces applied off the tip
+    # point: their moment about the tip is eps_abc (R_tip T)_bc, for any number of them.
+    tip_dead_force_arm_m_n: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    # Base clamp: rotation = play(compliance * base moment); zero compliance is rigid.
+    base_compliance_rad_per_nm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    base_play_rad: float = 0.0
+    previous_base_rotation_vector_rad: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # Measurement: sensor orientation = body orientation @ mounting rotation.
+    base_sensor_mounting: np.ndarray = field(default_factory=lambda: np.eye(3))
+    tip_sensor_mounting: np.ndarray = field(default_factory=lambda: np.eye(3))
+
+    def __post_init__(self) -> None:
+        samples = len(self.arc_length_m)
+        if self.distributed_force_in_base_n_m is None:
+            self.distributed_force_in_base_n_m = np.zeros((samples, 3))
+        if self.distributed_moment_in_body_nm_m is None:
+            self.distributed_moment_in_body_nm_m = np.zeros((samples, 3))
+
+    @classmethod
+    def nominal(cls, params: ModelParameters, jet_forces_n: np.ndarray,
+                arc_length_m: np.ndarray) -> "RodProblem":
+        """The paper's model with no effect applied: linear E, isotropic section, jets and
+        w_d at the tip, rigid clamp, sensors aligned with the body frames."""
+        rod = params.rod
+        youngs = np.asarray(rod.youngs_modulus_pa(arc_length_m), dtype=float)
+        bending = youngs * rod.second_moment_m4
+        torsion = np.asarray(rod.shear_modulus_pa(arc_length_m), dtype=float) * rod.polar_moment_m4
+        samples = len(arc_length_m)
+        return cls(
+            params=params,
+            jet_forces_n=np.asarray(jet_forces_n, dtype=float),
+            arc_length_m=arc_length_m,
+            bending_stiffness_x_nm2=bending,
+            bending_stiffness_y_nm2=bending.copy(),
+            torsional_stiffness_nm2=torsion,
+            intrinsic_curvature_in_body_1_m=np.zeros((samples, 3)),
+            jet_ring_angle_rad=params.jets.ring_angle_rad,
+            tip_follower_force_in_tip_n=np.array(params.disturbance.force_n, dtype=float),
+            tip_follower_moment_in_tip_nm=np.array(params.disturbance.moment_nm, dtype=float),
+        )
+
+    def add_tip_dead_force(self, force_in_base_n: np.ndarray, point_in_tip_m: np.ndarray) -> None:
+        """A force of fixed direction (e.g. a weight) applied at a point fixed in the tip
+        frame (e.g. the capsule's centre of mass)."""
+        force = np.asarray(force_in_base_n, dtype=float)
+        self.tip_dead_force_in_base_n = self.tip_dead_force_in_base_n + force
+        self.tip_dead_force_arm_m_n = self.tip_dead_force_arm_m_n + np.outer(point_in_tip_m, force)
+
+    def actuation_matrix(self) -> np.ndarray:
+        """Effective 3x3 map from commanded jet forces (N) to the tip-frame follower force."""
+        return actuation_matrix(self.jet_ring_angle_rad) * self.jet_gains[None, :]
+
+    @property
+    def depends_on_previous_state(self) -> bool:
+        return self.base_play_rad > 0.0 and bool(np.any(self.base_compliance_rad_per_nm > 0.0))
