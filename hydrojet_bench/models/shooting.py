@@ -6,7 +6,7 @@ chain of eqs. 6-16: n + 1 rigid links and n spherical joints whose stiffness fol
 eq. 10 with the linear E profile. Both compose the same effects through `RodProblem`, and
 both return a `Solution` with the backbone and the tip pose in the base frame.
 
-A solve is warm-started from a nearby `Solution` when one is given (its clamp wrench
+A solve is warm-started from a nearby `Solution` when one is given (its tip orientation
 and its solver matrix), and falls back to load ramping (continuation from the straight
 rod) for cold starts that fail and for bends past 150 degrees, where a direct cold
 shot may land on another equilibrium branch. When nothing converges it raises
@@ -64,7 +64,7 @@ class Solution:
     tip_sensor_mounting: np.ndarray
     iterations: int
     residual: float
-    # Solver state for warm starts: nondimensional Jacobian of the shooting residual.
+    # Solver state for warm starts: Jacobian of the clamp residual w.r.t. the tip rotation.
     jacobian: np.ndarray = field(repr=False)
 
     @property
@@ -100,7 +100,8 @@ class Solution:
 
 @dataclass
 class PreparedProblem:
-    """A `RodProblem` packed for the kernel: nondimensional arrays plus the scales.
+    """A `RodProblem` packed for the kernel: nondimensional arrays plus the scales
+    (``wrench_scale`` turns a nondimensional force-moment pair into N and N m).
 
     The disturbance (tip follower wrench) lives only in ``tip``, so sensitivities to w_d
     copy a prepared problem and change two slices instead of rebuilding it."""
@@ -113,12 +114,20 @@ class PreparedProblem:
     length_m: float
     force_scale_n: float
     moment_scale_nm: float
+    node_arc_length_m: np.ndarray
+
+    @property
+    def wrench_scale(self) -> np.ndarray:
+        return np.repeat([self.force_scale_n, self.moment_scale_nm], 3)
+
+    def _replace_tip(self, tip: np.ndarray) -> "PreparedProblem":
+        return PreparedProblem(self.problem, self.profile, tip, self.base, self.beta, self.length_m,
+                               self.force_scale_n, self.moment_scale_nm, self.node_arc_length_m)
 
     def with_jets(self, jet_forces_n: np.ndarray) -> "PreparedProblem":
         tip = self.tip.copy()
         tip[kernels.TIP_JETS:kernels.TIP_JETS + 3] = jet_forces_n
-        return PreparedProblem(self.problem, self.profile, tip, self.base, self.beta, self.length_m,
-                               self.force_scale_n, self.moment_scale_nm)
+        return self._replace_tip(tip)
 
     def with_disturbance(self, force_n: np.ndarray, moment_nm: np.ndarray) -> "PreparedProblem":
         """Same problem with w_d replaced (tip frame, N and N m). Effects that add their own
@@ -129,29 +138,7 @@ class PreparedProblem:
             np.asarray(force_n) - params.disturbance.force_n) / self.force_scale_n
         tip[kernels.TIP_FOLLOWER_MOMENT:kernels.TIP_FOLLOWER_MOMENT + 3] += (
             np.asarray(moment_nm) - params.disturbance.moment_nm) / self.moment_scale_nm
-        return PreparedProblem(self.problem, self.profile, tip, self.base, self.beta, self.length_m,
-                               self.force_scale_n, self.moment_scale_nm)
-
-    def straight_rod_guess(self) -> np.ndarray:
-        """Clamp wrench (nondimensional) that balances the loads on the undeformed rod: the
-        cold-start guess, exact for a rod that does not bend."""
-        tip = self.tip
-        actuation = tip[kernels.TIP_ACTUATION:kernels.TIP_ACTUATION + 9].reshape(3, 3)
-        force = (actuation @ tip[kernels.TIP_JETS:kernels.TIP_JETS + 3]
-                 + tip[kernels.TIP_FOLLOWER_FORCE:kernels.TIP_FOLLOWER_FORCE + 3]
-                 + tip[kernels.TIP_DEAD_FORCE:kernels.TIP_DEAD_FORCE + 3])
-        arm = tip[kernels.TIP_DEAD_ARM:kernels.TIP_DEAD_ARM + 9].reshape(3, 3)
-        moment = (tip[kernels.TIP_FOLLOWER_MOMENT:kernels.TIP_FOLLOWER_MOMENT + 3]
-                  + tip[kernels.TIP_DEAD_MOMENT:kernels.TIP_DEAD_MOMENT + 3]
-                  + np.array([arm[1, 2] - arm[2, 1], arm[2, 0] - arm[0, 2], arm[0, 1] - arm[1, 0]])
-                  + np.cross([0.0, 0.0, 1.0], force))
-        s = np.linspace(0.0, 1.0, self.profile.shape[0])
-        distributed = self.profile[:, kernels.DISTRIBUTED_FORCE:kernels.DISTRIBUTED_FORCE + 3]
-        distributed_moment = self.profile[:, kernels.DISTRIBUTED_MOMENT:kernels.DISTRIBUTED_MOMENT + 3]
-        force = force + np.trapezoid(distributed, s, axis=0)
-        moment = (moment + np.trapezoid(np.cross(np.outer(s, [0.0, 0.0, 1.0]), distributed), s, axis=0)
-                  + np.trapezoid(distributed_moment, s, axis=0))
-        return np.concatenate([force, moment])
+        return self._replace_tip(tip)
 
 
 class ShootingModel:
@@ -178,8 +165,7 @@ class ShootingModel:
         self.tolerance = tolerance
         self.max_iterations = max_iterations
         self._uses_actuation = any(e.uses_actuation for e in self.effects)
-        self._cache_key: tuple | None = None
-        self._cache_value: PreparedProblem | None = None
+        self._cached: PreparedProblem | None = None
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(effects={[e.name for e in self.effects]}, resolution={self.resolution})"
@@ -197,8 +183,6 @@ class ShootingModel:
                       previous: Solution | None = None) -> RodProblem:
         """The nominal problem with every effect applied."""
         jets = np.asarray(jet_forces_n, dtype=float)
-        if jets.shape != (3,) or not np.all(np.isfinite(jets)):
-            raise ValueError(f"jet_forces_n must be 3 finite numbers, got {jet_forces_n!r}")
         problem = RodProblem.nominal(params, jets, self.sample_arc_length_m(params.rod.length_m))
         if previous is not None:
             problem.previous_base_rotation_vector_rad = previous.base_rotation_vector_rad.copy()
@@ -208,22 +192,18 @@ class ShootingModel:
 
     def prepare(self, jet_forces_n: Sequence[float], params: ModelParameters,
                 previous: Solution | None = None) -> PreparedProblem:
-        """Pack the problem for the kernel, reusing the last packing when only the jet
-        forces changed and no effect depends on them or on the path."""
+        """Pack the problem for the kernel. The last packing is reused when only the jet
+        forces changed, unless an effect reads them or the clamp depends on the path:
+        rebuilding costs more than a warm solve."""
         jets = np.asarray(jet_forces_n, dtype=float)
-        previous_state = None if previous is None else previous.base_rotation_vector_rad.tobytes()
-        key = (id(params), jets.tobytes() if self._uses_actuation else None)
-        cached = self._cache_value
-        if (cached is not None and self._cache_key is not None and self._cache_key[0] is params
-                and self._cache_key[1:] == key[1:]
-                and (not cached.problem.depends_on_previous_state or self._cache_key[2] == previous_state)):
-            if jets.shape != (3,) or not np.all(np.isfinite(jets)):
-                raise ValueError(f"jet_forces_n must be 3 finite numbers, got {jet_forces_n!r}")
+        if jets.shape != (3,) or not np.all(np.isfinite(jets)):
+            raise ValueError(f"jet_forces_n must be 3 finite numbers, got {jet_forces_n!r}")
+        cached = self._cached
+        if (cached is not None and cached.problem.params is params and not self._uses_actuation
+                and not cached.problem.depends_on_previous_state):
             return cached.with_jets(jets)
         prepared = self._pack(self.build_problem(jets, params, previous))
-        # Hold a reference to params so its id cannot be reused by another object.
-        self._cache_key = (params, key[1], previous_state)
-        self._cache_value = prepared
+        self._cached = prepared
         return prepared
 
     def _pack(self, problem: RodProblem) -> PreparedProblem:
@@ -242,8 +222,9 @@ class ShootingModel:
             problem.distributed_force_in_base_n_m * length / force_scale)
         profile[:, kernels.DISTRIBUTED_MOMENT:kernels.DISTRIBUTED_MOMENT + 3] = (
             problem.distributed_moment_in_body_nm_m * length / moment_scale)
-        if not np.all(np.isfinite(profile)) or np.any(profile[:, :3] <= 0.0):
+        if not np.all(np.isfinite(profile[:, :kernels.COMPLIANCE])) or np.any(profile[:, :3] <= 0.0):
             raise ValueError("effects produced a non-finite profile or a non-positive stiffness")
+        profile[:, kernels.COMPLIANCE:kernels.COMPLIANCE + 3] = 1.0 / profile[:, kernels.STIFFNESS:kernels.STIFFNESS + 3]
         tip = np.zeros(kernels.TIP_SIZE)
         tip[kernels.TIP_FOLLOWER_FORCE:kernels.TIP_FOLLOWER_FORCE + 3] = problem.tip_follower_force_in_tip_n / force_scale
         tip[kernels.TIP_FOLLOWER_MOMENT:kernels.TIP_FOLLOWER_MOMENT + 3] = problem.tip_follower_moment_in_tip_nm / moment_scale
@@ -259,7 +240,7 @@ class ShootingModel:
         if not (np.all(np.isfinite(tip)) and np.all(np.isfinite(base))):
             raise ValueError("effects produced a non-finite tip load or clamp parameter")
         return PreparedProblem(problem, profile, tip, base, problem.cubic_stiffening_m2 / length**2,
-                               length, force_scale, moment_scale)
+                               length, force_scale, moment_scale, self.node_arc_length_m(length))
 
     # --- solving ------------------------------------------------------------------
 
@@ -276,76 +257,78 @@ class ShootingModel:
         return self.solve_prepared(prepared, warm_start if warm_start is not None else previous)
 
     def solve_prepared(self, prepared: PreparedProblem, warm_start: Solution | None = None) -> Solution:
-        nodes = len(self.node_arc_length_m(1.0))
-        nodes_p = np.empty((nodes, 3))
-        nodes_r = np.empty((nodes, 3, 3))
-        info = np.empty(4)
-        if warm_start is not None and warm_start.jacobian.shape == (6, 6):
-            x = self._to_unknowns(warm_start.base_wrench_in_base, prepared)
+        """Solve a packed problem; see `solve`."""
+        work = _Workspace(len(prepared.node_arc_length_m))
+        if warm_start is not None and warm_start.jacobian.shape == (kernels.UNKNOWNS, kernels.UNKNOWNS):
+            reference = warm_start.tip_rotation_in_base.copy()
             jacobian = warm_start.jacobian.copy()
-            if self._run(prepared, x, jacobian, True, 1.0, nodes_p, nodes_r, info):
-                return self._solution(prepared, x, jacobian, nodes_p, nodes_r, info)
-        x = prepared.straight_rod_guess()
-        jacobian = np.empty((6, 6))
-        direct = self._run(prepared, x, jacobian, False, 1.0, nodes_p, nodes_r, info)
-        if direct:
-            solution = self._solution(prepared, x, jacobian, nodes_p, nodes_r, info)
+            if self._run(prepared, reference, jacobian, True, 1.0, work):
+                return self._solution(prepared, jacobian, work)
+        jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
+        if self._run(prepared, np.eye(3), jacobian, False, 1.0, work):
+            solution = self._solution(prepared, jacobian, work)
             if solution.bend_angle_deg <= RAMP_BEND_DEG:
                 return solution
         for stages in RAMP_SCHEDULES:
-            ramped = self._ramp(prepared, stages, nodes_p, nodes_r, info)
+            ramped = self._ramp(prepared, stages, work)
             if ramped is not None:
                 return ramped
         raise ConvergenceError(
-            f"{self.name} model did not converge for jet forces {prepared.tip[kernels.TIP_JETS:].tolist()} N "
-            f"(residual {info[2]:.3g} after direct solve and load ramping in up to {RAMP_SCHEDULES[-1]} stages)")
+            f"{self.name} model did not converge for jet forces "
+            f"{prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].tolist()} N (residual {work.info[2]:.3g} "
+            f"after a direct solve and load ramping in up to {RAMP_SCHEDULES[-1]} stages)")
 
-    def _ramp(self, prepared: PreparedProblem, stages: int, nodes_p, nodes_r, info) -> Solution | None:
+    def _ramp(self, prepared: PreparedProblem, stages: int, work: "_Workspace") -> Solution | None:
         """Continuation: scale every load from 1/stages up to 1, each stage seeded by the last."""
-        x = np.zeros(6)
-        jacobian = np.empty((6, 6))
+        reference = np.eye(3)
+        jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
         have_jacobian = False
         for stage in range(1, stages + 1):
-            if not self._run(prepared, x, jacobian, have_jacobian, stage / stages, nodes_p, nodes_r, info):
+            # The kernel leaves ``reference`` at this stage's tip orientation.
+            if not self._run(prepared, reference, jacobian, have_jacobian, stage / stages, work):
                 return None
             have_jacobian = True
-        return self._solution(prepared, x, jacobian, nodes_p, nodes_r, info)
+        return self._solution(prepared, jacobian, work)
 
-    def _run(self, prepared: PreparedProblem, x, jacobian, have_jacobian, load_scale, nodes_p, nodes_r, info) -> bool:
-        kernels.solve(self.kind, self.resolution, x, jacobian, have_jacobian, prepared.profile, prepared.tip,
-                      prepared.base, prepared.beta, load_scale, self.tolerance, self.max_iterations,
-                      nodes_p, nodes_r, info)
-        return info[0] == kernels.CONVERGED
+    def _run(self, prepared: PreparedProblem, reference: np.ndarray, jacobian: np.ndarray,
+             have_jacobian: bool, load_scale: float, work: "_Workspace") -> bool:
+        kernels.solve(self.kind, self.resolution, reference, jacobian, have_jacobian, prepared.profile,
+                      prepared.tip, prepared.base, prepared.beta, load_scale, self.tolerance,
+                      self.max_iterations, work.nodes_p, work.nodes_r, work.clamp_state, work.info)
+        return work.info[0] == kernels.CONVERGED
 
-    @staticmethod
-    def _to_unknowns(base_wrench: np.ndarray, prepared: PreparedProblem) -> np.ndarray:
-        x = np.empty(6)
-        x[:3] = base_wrench[:3] / prepared.force_scale_n
-        x[3:] = base_wrench[3:] / prepared.moment_scale_nm
-        return x
-
-    def _solution(self, prepared: PreparedProblem, x, jacobian, nodes_p, nodes_r, info) -> Solution:
+    def _solution(self, prepared: PreparedProblem, jacobian: np.ndarray, work: "_Workspace") -> Solution:
         problem = prepared.problem
-        base_wrench = np.empty(6)
-        base_wrench[:3] = x[:3] * prepared.force_scale_n
-        base_wrench[3:] = x[3:] * prepared.moment_scale_nm
-        clamp_rotation = np.zeros(3)
-        if np.any(prepared.base[:3] != 0.0):
-            clamp_rotation = np.array(kernels.clamp_rotation_vector(x, prepared.base))
+        clamp = work.clamp_state
+        base_wrench = clamp[12:18] * prepared.wrench_scale
+        clamp_rotation = _NO_ROTATION
+        if prepared.base[kernels.BASE_COMPLIANCE:kernels.BASE_COMPLIANCE + 3].any():
+            clamp_rotation = np.array(kernels.clamp_rotation_vector(clamp[15:18], prepared.base))
+        # The shot starts with the tip at the origin; put the clamp there instead.
+        positions = work.nodes_p
+        positions -= clamp[:3]
+        positions *= prepared.length_m
         return Solution(
-            model=self.name,
-            jet_forces_n=prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].copy(),
-            arc_length_m=self.node_arc_length_m(prepared.length_m),
-            positions_in_base_m=nodes_p * prepared.length_m,
-            rotations_in_base=nodes_r.copy(),
-            base_wrench_in_base=base_wrench,
-            base_rotation_vector_rad=clamp_rotation,
-            base_sensor_mounting=problem.base_sensor_mounting,
-            tip_sensor_mounting=problem.tip_sensor_mounting,
-            iterations=int(info[1]),
-            residual=float(info[2]),
-            jacobian=jacobian.copy(),
+            self.name, prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].copy(), prepared.node_arc_length_m,
+            positions, work.nodes_r, base_wrench, clamp_rotation, problem.base_sensor_mounting,
+            problem.tip_sensor_mounting, int(work.info[1]), float(work.info[2]), jacobian,
         )
+
+
+_NO_ROTATION = np.zeros(3)
+_NO_ROTATION.flags.writeable = False
+
+
+class _Workspace:
+    """Output buffers of one solve."""
+
+    __slots__ = ("nodes_p", "nodes_r", "clamp_state", "info")
+
+    def __init__(self, nodes: int) -> None:
+        self.nodes_p = np.empty((nodes, 3))
+        self.nodes_r = np.empty((nodes, 3, 3))
+        self.clamp_state = np.empty(18)
+        self.info = np.empty(4)
 
 
 class CosseratModel(ShootingModel):
@@ -368,8 +351,9 @@ class PrbModel(ShootingModel):
     l_s; with it the chain converges to a rod twice as stiff as the Cosserat model as the
     links multiply, which the paper's near-equal calibrated moduli for the two models
     rule out, so we read it as a typesetting slip.) The spring acts on the joint's
-    rotation vector expressed in the proximal link, theta_j = K_j^-1 R_{j-1}^T m_j: the
-    joint torque of eqs. 14-15, J^T w, is exactly that moment about the joint's axes, so
+    rotation vector, with the joint's axes fixed in the distal link, theta_j = K_j^-1
+    R_j^T m_j: the joint torque of eqs. 14-15, J^T w, is exactly that moment about the
+    joint's axes, so
     the chain satisfies eq. 16's K theta = tau_f + tau_a (tested against explicit
     Jacobians). Equilibrium is found by the same Newton iteration on the clamp wrench
     as the Cosserat model: six unknowns instead of 3n.
