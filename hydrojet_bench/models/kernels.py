@@ -538,3 +538,63 @@ def clamp_rotation_vector(moment, base):
     """Rotation vector (rad) of the clamp under the (nondimensional) clamp moment."""
     rotation = np.empty((3, 3))
     return _clamp(moment[0], moment[1], moment[2], base, rotation)
+
+
+@njit(cache=True)
+def jacobian_at(kind, resolution, reference, profile, tip, base, beta, jacobian):
+    """Finite-difference Jacobian of the clamp residual at the tip orientation
+    ``reference`` (full load): an accurate matrix for solves near this one."""
+    y = np.empty(18)
+    work = np.empty((3, 3))
+    x = np.zeros(3)
+    r = np.empty(3)
+    nodes_p = np.empty((1, 3))
+    nodes_r = np.empty((1, 3, 3))
+    shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, r, y, work, nodes_p, nodes_r, False)
+    _finite_difference_jacobian(kind, resolution, x, reference, r, profile, tip, base, beta, 1.0,
+                                jacobian, y, work, nodes_p, nodes_r)
+
+
+@njit(cache=True)
+def body_twist(rotation_a, position_a, rotation_b, position_b, out):
+    """Twist (v, omega) in frame a with exp(twist) = g_a^-1 g_b: se(3) logarithm of the
+    relative pose, for poses given as rotation matrices and positions."""
+    rel = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            rel[i, j] = rotation_a[0, i] * rotation_b[0, j] + rotation_a[1, i] * rotation_b[1, j] + rotation_a[2, i] * rotation_b[2, j]
+    dp0 = position_b[0] - position_a[0]
+    dp1 = position_b[1] - position_a[1]
+    dp2 = position_b[2] - position_a[2]
+    t0 = rotation_a[0, 0] * dp0 + rotation_a[1, 0] * dp1 + rotation_a[2, 0] * dp2
+    t1 = rotation_a[0, 1] * dp0 + rotation_a[1, 1] * dp1 + rotation_a[2, 1] * dp2
+    t2 = rotation_a[0, 2] * dp0 + rotation_a[1, 2] * dp1 + rotation_a[2, 2] * dp2
+    # Rotation vector through the quaternion (accurate for small and large angles).
+    w = 0.5 * np.sqrt(max(1.0 + rel[0, 0] + rel[1, 1] + rel[2, 2], 0.0))
+    if w < 1e-6:
+        raise ValueError("body_twist: relative rotation too close to a half turn")
+    vx = (rel[2, 1] - rel[1, 2]) / (4.0 * w)
+    vy = (rel[0, 2] - rel[2, 0]) / (4.0 * w)
+    vz = (rel[1, 0] - rel[0, 1]) / (4.0 * w)
+    sine = np.sqrt(vx * vx + vy * vy + vz * vz)
+    theta = 2.0 * np.arctan2(sine, w)
+    scale = 2.0 / w if sine < 1e-12 else theta / sine
+    ox, oy, oz = scale * vx, scale * vy, scale * vz
+    # v = J_l(omega)^-1 t, with J_l^-1 = I - hat(w)/2 + c hat(w)^2.
+    if theta < 1e-6:
+        c = 1.0 / 12.0
+    else:
+        half = 0.5 * theta
+        c = (1.0 - half * np.cos(half) / np.sin(half)) / (theta * theta)
+    cx = oy * t2 - oz * t1
+    cy = oz * t0 - ox * t2
+    cz = ox * t1 - oy * t0
+    ccx = oy * cz - oz * cy
+    ccy = oz * cx - ox * cz
+    ccz = ox * cy - oy * cx
+    out[0] = t0 - 0.5 * cx + c * ccx
+    out[1] = t1 - 0.5 * cy + c * ccy
+    out[2] = t2 - 0.5 * cz + c * ccz
+    out[3] = ox
+    out[4] = oy
+    out[5] = oz

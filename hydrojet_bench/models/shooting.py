@@ -16,7 +16,7 @@ shot may land on another equilibrium branch. When nothing converges it raises
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import numpy as np
@@ -129,15 +129,12 @@ class PreparedProblem:
         tip[kernels.TIP_JETS:kernels.TIP_JETS + 3] = jet_forces_n
         return self._replace_tip(tip)
 
-    def with_disturbance(self, force_n: np.ndarray, moment_nm: np.ndarray) -> "PreparedProblem":
-        """Same problem with w_d replaced (tip frame, N and N m). Effects that add their own
-        follower wrench keep it: only the difference from the current w_d is applied."""
-        params = self.problem.params
+    def with_disturbance_offset(self, component: int, offset: float) -> "PreparedProblem":
+        """Same problem with w_d component ``component`` (0-2 force in N, 3-5 moment in
+        N m, tip frame, the order of `DISTURBANCE_NAMES`) increased by ``offset``."""
         tip = self.tip.copy()
-        tip[kernels.TIP_FOLLOWER_FORCE:kernels.TIP_FOLLOWER_FORCE + 3] += (
-            np.asarray(force_n) - params.disturbance.force_n) / self.force_scale_n
-        tip[kernels.TIP_FOLLOWER_MOMENT:kernels.TIP_FOLLOWER_MOMENT + 3] += (
-            np.asarray(moment_nm) - params.disturbance.moment_nm) / self.moment_scale_nm
+        scale = self.force_scale_n if component < 3 else self.moment_scale_nm
+        tip[kernels.TIP_FOLLOWER_FORCE + component] += offset / scale
         return self._replace_tip(tip)
 
 
@@ -277,6 +274,15 @@ class ShootingModel:
             f"{self.name} model did not converge for jet forces "
             f"{prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].tolist()} N (residual {work.info[2]:.3g} "
             f"after a direct solve and load ramping in up to {RAMP_SCHEDULES[-1]} stages)")
+
+    def with_accurate_jacobian(self, solution: Solution, prepared: PreparedProblem) -> Solution:
+        """The same solution carrying a finite-difference Jacobian at its own tip
+        orientation (three extra shots) instead of the Broyden estimate, so that solves of
+        nearby problems seeded from it converge in one step: what a sensitivity wants."""
+        jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
+        kernels.jacobian_at(self.kind, self.resolution, solution.tip_rotation_in_base, prepared.profile,
+                            prepared.tip, prepared.base, prepared.beta, jacobian)
+        return replace(solution, jacobian=jacobian)
 
     def _ramp(self, prepared: PreparedProblem, stages: int, work: "_Workspace") -> Solution | None:
         """Continuation: scale every load from 1/stages up to 1, each stage seeded by the last."""
