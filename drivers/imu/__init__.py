@@ -1,0 +1,57 @@
+"""Two ICM-20948 IMUs (0x68 base, 0x69 tip) on one I2C bus, each with its AK09916
+magnetometer read through the chip's auxiliary I2C master.
+
+Layers: `registers` (datasheet register map), `codec` (one burst <-> `RawImuSample`,
+SI units), `driver` (`Icm20948`, synchronous register-level start-up and sampling over
+any `smbus2.SMBus`-like object), `async_driver` (worker thread + timeout for the bench),
+`calibration` (gyro bias, hard/soft iron), `fusion` (Madgwick orientation and the
+tip-relative-to-base rotation) and `emulator` (`Icm20948BusEmulator`, an SMBus stand-in
+that synthesises both chips from a `drivers.plant.Plant`).
+
+Real bus: `Icm20948(smbus2.SMBus(1), 0x68)`.
+"""
+
+from drivers.imu.async_driver import AsyncIcm20948
+from drivers.imu.calibration import GyroBiasEstimate, ImuCalibration, ImuSample, estimate_gyro_bias
+from drivers.imu.codec import ImuRanges, RawImuSample, decode_burst, encode_burst
+from drivers.imu.driver import Icm20948
+from drivers.imu.emulator import Icm20948BusEmulator, ImuErrorModel
+from drivers.imu.errors import (
+    ImuAuxBusError,
+    ImuBusError,
+    ImuConfigError,
+    ImuError,
+    ImuIdentityError,
+    ImuMotionError,
+    ImuNotFoundError,
+    ImuProtocolError,
+    ImuTimeoutError,
+)
+from drivers.imu.fusion import ImuOrientationFilter, ImuPairFusion, tip_relative_to_base
+
+__all__ = [
+    "AsyncIcm20948",
+    "GyroBiasEstimate",
+    "Icm20948",
+    "Icm20948BusEmulator",
+    "ImuAuxBusError",
+    "ImuBusError",
+    "ImuCalibration",
+    "ImuConfigError",
+    "ImuError",
+    "ImuErrorModel",
+    "ImuIdentityError",
+    "ImuMotionError",
+    "ImuNotFoundError",
+    "ImuOrientationFilter",
+    "ImuPairFusion",
+    "ImuProtocolError",
+    "ImuRanges",
+    "ImuSample",
+    "ImuTimeoutError",
+    "RawImuSample",
+    "decode_burst",
+    "encode_burst",
+    "estimate_gyro_bias",
+    "tip_relative_to_base",
+]

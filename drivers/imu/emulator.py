@@ -1,0 +1,580 @@
+"""Emulator of the bench's I2C bus: two ICM-20948s (0x68 base, 0x69 tip), each with an
+AK09916 behind its auxiliary I2C master, speaking register for register.
+
+`Icm20948BusEmulator` is a drop-in for `smbus2.SMBus`: the same method names and the same
+limits (32-byte SMBus blocks, `OSError(EREMOTEIO)` for an address nobody acknowledges).
+Per chip it models the four register banks and REG_BANK_SEL, reset and sleep, the
+output data rate set by GYRO_SMPLRT_DIV, read-to-clear I2C_MST_STATUS, SLV0 (repeated
+read into EXT_SLV_SENS_DATA at every sample) and SLV4 (one transfer per enable, DONE /
+NACK status). The AK09916 model has WIA1/WIA2, power-down / single / continuous modes,
+DRDY and DOR, ST2 release of the data registers, HOFL overflow, soft reset and the
+register auto-increment of its datasheet. Not modelled: FIFO, DMP, interrupts, bank 1,
+SLV1-3, self-test, digital low-pass filtering.
+
+Data come from the plant's truth at each sample instant (plant time = `clock()`):
+
+    accel = S_a R^T (a_world - g_world) + noise           (specific force, m/s^2)
+    gyro  = S_g omega_sensor + bias + drift + noise        (rad/s)
+    mag   = M_soft R^T (B_world + disturbance) + hard + noise   (uT)
+
+with R the IMU frame's orientation in the world (the plant sensor's orientation times the
+optional mounting rotation), S the per-axis scale errors, all noise from one seeded
+generator per chip. Noise is not optional in spirit: `ahrs`' Madgwick returns q
+unchanged for a gyro of exactly zero, so a noiseless emulator would never converge.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import errno as errno_codes
+import math
+import os
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from drivers.imu import registers as reg
+from drivers.imu.codec import ImuRanges, Vector3, encode_ak09916_block, encode_mag_counts, encode_motion
+from drivers.plant import Plant
+from hydrojet_bench.geometry import matrix_from_quat
+
+Matrix3 = tuple[Vector3, Vector3, Vector3]
+
+DEFAULT_SENSORS: Mapping[int, str] = {
+    reg.ICM20948_ADDRESS_AD0_LOW: "base",
+    reg.ICM20948_ADDRESS_AD0_HIGH: "tip",
+}
+# linux/i2c-dev.h: I2C_RDWR_IOCTL_MAX_MSGS
+_MAX_RDWR_MESSAGES = 42
+_RESET_DURATION_S = 0.001
+# AK09916 datasheet: single measurement takes at most about 8 ms.
+_AK_SINGLE_MEASUREMENT_S = 0.008
+_AK_VALID_MODES = {reg.AK_MODE_POWER_DOWN, reg.AK_MODE_SINGLE, 0x10, *reg.AK_CONTINUOUS_MODES_HZ}
+
+
+@dataclass(frozen=True)
+class ImuErrorModel:
+    """Imperfections of one emulated IMU (all in the IMU's accel/gyro frame).
+
+    *_noise_*: white noise standard deviation per output sample. Defaults follow the
+        ICM-20948 datasheet noise densities at ~50 Hz bandwidth (accel 230 ug/sqrt(Hz),
+        gyro 0.015 deg/s/sqrt(Hz)) and a few AK09916 LSB.
+    gyro_bias_rad_s: constant bias; gyro_bias_random_walk_rad_s_per_sqrt_s: the slow
+        drift added on top (a random walk).
+    accel_scale_error / gyro_scale_error: per-axis fractional scale errors.
+    mag_hard_iron_ut: offset added to the field; mag_soft_iron: distortion matrix applied
+        to the true field (an `ImuCalibration` with the inverse undoes it).
+    temperature_degc: die temperature reported.
+    """
+
+    accel_noise_m_s2: float = 0.016
+    gyro_noise_rad_s: float = 0.0019
+    mag_noise_ut: float = 0.3
+    gyro_bias_rad_s: Vector3 = (0.006, -0.004, 0.005)
+    gyro_bias_random_walk_rad_s_per_sqrt_s: float = 2e-5
+    accel_scale_error: Vector3 = (0.002, -0.003, 0.001)
+    gyro_scale_error: Vector3 = (0.003, 0.002, -0.002)
+    mag_hard_iron_ut: Vector3 = (0.0, 0.0, 0.0)
+    mag_soft_iron: Matrix3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    temperature_degc: float = 30.0
+
+    def __post_init__(self) -> None:
+        for name in ("accel_noise_m_s2", "gyro_noise_rad_s", "mag_noise_ut", "gyro_bias_random_walk_rad_s_per_sqrt_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+        for name in ("gyro_bias_rad_s", "accel_scale_error", "gyro_scale_error", "mag_hard_iron_ut"):
+            value = np.asarray(getattr(self, name), dtype=float)
+            if value.shape != (3,) or not np.all(np.isfinite(value)):
+                raise ValueError(f"{name} must be three finite numbers")
+        soft = np.asarray(self.mag_soft_iron, dtype=float)
+        if soft.shape != (3, 3) or not np.all(np.isfinite(soft)):
+            raise ValueError("mag_soft_iron must be a finite 3x3 matrix")
+
+
+@dataclass
+class _TruthFrame:
+    """What the physics says at one instant, in the IMU frame."""
+
+    specific_force_m_s2: np.ndarray
+    angular_velocity_rad_s: np.ndarray
+    field_ut: np.ndarray
+
+
+class _EmulatedAk09916:
+    """The magnetometer die behind one chip's auxiliary master (address 0x0C)."""
+
+    def __init__(self, measure: Callable[[float], tuple[tuple[int, int, int], bool]]) -> None:
+        # measure(t) -> (die-axis counts, overflow) for a measurement at plant time t.
+        self._measure = measure
+        self.reset(0.0)
+
+    def reset(self, now: float) -> None:
+        self.regs = bytearray(0x40)
+        self.regs[reg.AK_WIA1] = reg.AK_WIA1_VALUE
+        self.regs[reg.AK_WIA2] = reg.AK_WIA2_VALUE
+        self._mode = reg.AK_MODE_POWER_DOWN
+        self._mode_since = now
+        self._last_index = 0
+        self._single_due: float | None = None
+        self._locked = False  # data registers read but ST2 not yet: hold them
+
+    def _latch(self, t: float) -> None:
+        if self._locked or self.regs[reg.AK_ST1] & reg.AK_ST1_DRDY:
+            # The previous measurement was never fully read: this one is skipped over it.
+            self.regs[reg.AK_ST1] |= reg.AK_ST1_DOR
+        if self._locked:
+            return
+        counts, overflow = self._measure(t)
+        block = encode_ak09916_block(counts, data_ready=True, overrun=False, overflow=overflow)
+        self.regs[reg.AK_HXL : reg.AK_ST2 + 1] = block[1:]
+        self.regs[reg.AK_ST1] |= reg.AK_ST1_DRDY
+
+    def update(self, now: float) -> None:
+        if self._mode in reg.AK_CONTINUOUS_MODES_HZ:
+            rate = reg.AK_CONTINUOUS_MODES_HZ[self._mode]
+            index = math.floor((now - self._mode_since) * rate)
+            if index > self._last_index:
+                skipped = index - self._last_index > 1
+                self._last_index = index
+                self._latch(self._mode_since + index / rate)
+                if skipped:
+                    # measurements came and went unread between two looks at the die
+                    self.regs[reg.AK_ST1] |= reg.AK_ST1_DOR
+        elif self._single_due is not None and now >= self._single_due:
+            self._latch(self._single_due)
+            self._single_due = None
+            self._mode = reg.AK_MODE_POWER_DOWN
+            self.regs[reg.AK_CNTL2] = reg.AK_MODE_POWER_DOWN
+
+    @staticmethod
+    def _next_address(address: int) -> int:
+        # AK09916 auto-increment: 00-03 then 10-18 then back to 00; 30-32 wraps to 30.
+        if address == 0x03:
+            return 0x10
+        if address == reg.AK_ST2:
+            return 0x00
+        if address == reg.AK_CNTL3:
+            return reg.AK_CNTL2 - 1
+        return (address + 1) % 0x40
+
+    def read(self, address: int, length: int, now: float) -> bytes:
+        self.update(now)
+        out = bytearray()
+        for _ in range(length):
+            out.append(self.regs[address])
+            if reg.AK_HXL <= address <= reg.AK_TMPS:
+                self.regs[reg.AK_ST1] &= ~(reg.AK_ST1_DRDY | reg.AK_ST1_DOR) & 0xFF
+                self._locked = True
+            elif address == reg.AK_ST2:
+                self.regs[reg.AK_ST1] &= ~(reg.AK_ST1_DRDY | reg.AK_ST1_DOR) & 0xFF
+                self._locked = False
+            address = self._next_address(address)
+        return bytes(out)
+
+    def write(self, address: int, value: int, now: float) -> None:
+        self.update(now)
+        if address == reg.AK_CNTL3 and value & reg.AK_CNTL3_SRST:
+            self.reset(now)
+        elif address == reg.AK_CNTL2:
+            mode = value & 0x1F
+            if mode not in _AK_VALID_MODES:
+                return
+            self.regs[reg.AK_CNTL2] = mode
+            self._mode = mode
+            self._mode_since = now
+            self._last_index = 0
+            self._single_due = now + _AK_SINGLE_MEASUREMENT_S if mode == reg.AK_MODE_SINGLE else None
+
+
+class _EmulatedIcm20948:
+    """One chip's register file, sampling and auxiliary master."""
+
+    def __init__(self, owner: Icm20948BusEmulator, address: int, sensor: str, model: ImuErrorModel,
+                 mounting: np.ndarray, seed: int) -> None:
+        self.owner = owner
+        self.address = address
+        self.sensor = sensor
+        self.model = model
+        self.mounting = mounting
+        self.rng = np.random.default_rng([seed, address])
+        self.bias_drift_rad_s = np.zeros(3)
+        self.ak = _EmulatedAk09916(self._measure_mag)
+        self._power_on(owner.clock())
+
+    # --- state ------------------------------------------------------------------------
+
+    def _power_on(self, now: float) -> None:
+        self.banks = [bytearray(0x80) for _ in range(reg.BANK_COUNT)]
+        self.banks[0][reg.WHO_AM_I] = self.owner.who_am_i.get(self.address, reg.WHO_AM_I_VALUE)
+        self.banks[0][reg.PWR_MGMT_1] = reg.PWR_MGMT_1_RESET_VALUE
+        self.banks[2][reg.GYRO_CONFIG_1] = 0x01  # DS 7 bank 2 map: reset value
+        self.banks[2][reg.ACCEL_CONFIG] = 0x01
+        self.bank = 0
+        self.reset_until = now
+        self._anchor(now)
+
+    def _anchor(self, now: float) -> None:
+        """Restart the output-rate grid (wake, or a new sample rate divider)."""
+        self.t_origin = now
+        self.last_index = 0
+
+    @property
+    def awake(self) -> bool:
+        return not self.banks[0][reg.PWR_MGMT_1] & reg.PWR_MGMT_1_SLEEP
+
+    @property
+    def period_s(self) -> float:
+        return (1 + self.banks[2][reg.GYRO_SMPLRT_DIV]) / reg.BASE_SAMPLE_RATE_HZ
+
+    def ranges(self) -> ImuRanges:
+        accel_fs = reg.ACCEL_FULL_SCALES[(self.banks[2][reg.ACCEL_CONFIG] >> 1) & 0x03][0]
+        gyro_fs = reg.GYRO_FULL_SCALES[(self.banks[2][reg.GYRO_CONFIG_1] >> 1) & 0x03][0]
+        return ImuRanges(accel_full_scale_g=accel_fs, gyro_full_scale_dps=gyro_fs)
+
+    # --- physics ----------------------------------------------------------------------
+
+    def truth(self, t: float) -> _TruthFrame:
+        plant = self.owner.plant
+        state = plant.sensor_truth(self.sensor, t)
+        rotation = matrix_from_quat(state.orientation_in_world) @ self.mounting
+        specific_force = rotation.T @ (
+            np.asarray(state.linear_acceleration_in_world_m_s2, dtype=float) - plant.gravity_in_world_m_s2
+        )
+        omega = self.mounting.T @ np.asarray(state.angular_velocity_in_sensor_rad_s, dtype=float)
+        field_world = np.asarray(plant.magnetic_field_in_world_ut, dtype=float) + self.owner.magnetic_disturbance(
+            self.sensor
+        )
+        return _TruthFrame(specific_force, omega, rotation.T @ field_world)
+
+    def gyro_bias_rad_s(self) -> np.ndarray:
+        return np.asarray(self.model.gyro_bias_rad_s) + self.bias_drift_rad_s
+
+    def _measure_mag(self, t: float) -> tuple[tuple[int, int, int], bool]:
+        m = self.model
+        true_field = self.truth(t).field_ut
+        measured = (
+            np.asarray(m.mag_soft_iron) @ true_field
+            + np.asarray(m.mag_hard_iron_ut)
+            + self.rng.normal(0.0, m.mag_noise_ut, 3)
+        )
+        overflow = float(np.sum(np.abs(measured))) >= reg.MAG_OVERFLOW_SUM_UT
+        return encode_mag_counts((float(measured[0]), float(measured[1]), float(measured[2]))), overflow
+
+    def _sample_motion(self, t: float, steps: int) -> None:
+        m = self.model
+        walk = m.gyro_bias_random_walk_rad_s_per_sqrt_s * math.sqrt(steps * self.period_s)
+        self.bias_drift_rad_s = self.bias_drift_rad_s + self.rng.normal(0.0, walk, 3)
+        frame = self.truth(t)
+        accel = (1.0 + np.asarray(m.accel_scale_error)) * frame.specific_force_m_s2 + self.rng.normal(
+            0.0, m.accel_noise_m_s2, 3
+        )
+        gyro = (
+            (1.0 + np.asarray(m.gyro_scale_error)) * frame.angular_velocity_rad_s
+            + self.gyro_bias_rad_s()
+            + self.rng.normal(0.0, m.gyro_noise_rad_s, 3)
+        )
+        motion = encode_motion(
+            (float(accel[0]), float(accel[1]), float(accel[2])),
+            (float(gyro[0]), float(gyro[1]), float(gyro[2])),
+            m.temperature_degc,
+            self.ranges(),
+        )
+        disabled = self.banks[0][reg.PWR_MGMT_2]
+        data = self.banks[0]
+        if not disabled & reg.PWR_MGMT_2_DISABLE_ACCEL:
+            data[reg.ACCEL_XOUT_H : reg.GYRO_XOUT_H] = motion[0:6]
+        if not disabled & reg.PWR_MGMT_2_DISABLE_GYRO:
+            data[reg.GYRO_XOUT_H : reg.TEMP_OUT_H] = motion[6:12]
+        data[reg.TEMP_OUT_H : reg.EXT_SLV_SENS_DATA_00] = motion[12:14]
+
+    def _run_aux_master(self, now: float) -> None:
+        if not self.banks[0][reg.USER_CTRL] & reg.USER_CTRL_I2C_MST_EN:
+            return
+        bank3 = self.banks[3]
+        status = 0
+        if bank3[reg.I2C_SLV0_CTRL] & reg.I2C_SLV_EN:
+            address = bank3[reg.I2C_SLV0_ADDR] & 0x7F
+            length = bank3[reg.I2C_SLV0_CTRL] & reg.I2C_SLV_LENG_MASK
+            if address != reg.AK09916_ADDRESS:
+                status |= reg.I2C_MST_STATUS_SLV0_NACK
+            elif bank3[reg.I2C_SLV0_ADDR] & reg.I2C_SLV_READ:
+                if length:
+                    data = self.ak.read(bank3[reg.I2C_SLV0_REG], length, now)
+                    start = reg.EXT_SLV_SENS_DATA_00
+                    self.banks[0][start : start + length] = data
+            else:
+                self.ak.write(bank3[reg.I2C_SLV0_REG], bank3[reg.I2C_SLV0_DO], now)
+        if bank3[reg.I2C_SLV4_CTRL] & reg.I2C_SLV_EN:
+            address = bank3[reg.I2C_SLV4_ADDR] & 0x7F
+            status |= reg.I2C_MST_STATUS_SLV4_DONE
+            if address != reg.AK09916_ADDRESS:
+                status |= reg.I2C_MST_STATUS_SLV4_NACK
+            elif bank3[reg.I2C_SLV4_ADDR] & reg.I2C_SLV_READ:
+                bank3[reg.I2C_SLV4_DI] = self.ak.read(bank3[reg.I2C_SLV4_REG], 1, now)[0]
+            else:
+                self.ak.write(bank3[reg.I2C_SLV4_REG], bank3[reg.I2C_SLV4_DO], now)
+            bank3[reg.I2C_SLV4_CTRL] &= ~reg.I2C_SLV_EN & 0xFF  # a single transfer
+        self.banks[0][reg.I2C_MST_STATUS] |= status
+
+    def tick(self, now: float) -> None:
+        """Bring the chip up to time `now`: finish a reset, latch the newest sample and run
+        the auxiliary master once for it."""
+        pwr = self.banks[0][reg.PWR_MGMT_1]
+        if pwr & reg.PWR_MGMT_1_DEVICE_RESET and now >= self.reset_until:
+            self._power_on(now)
+            return
+        if not self.awake:
+            self.ak.update(now)
+            return
+        index = math.floor((now - self.t_origin) / self.period_s)
+        if index <= self.last_index:
+            return
+        steps = index - self.last_index
+        self.last_index = index
+        t_sample = self.t_origin + index * self.period_s
+        self._sample_motion(t_sample, steps)
+        self._run_aux_master(t_sample)
+
+    # --- register access --------------------------------------------------------------
+
+    def read(self, register: int, length: int, now: float) -> bytes:
+        self.tick(now)
+        out = bytearray()
+        for _ in range(length):
+            if register == reg.REG_BANK_SEL:
+                out.append(self.bank << reg.BANK_SHIFT)
+            else:
+                out.append(self.banks[self.bank][register])
+                if self.bank == 0 and register == reg.I2C_MST_STATUS:
+                    self.banks[0][register] = 0  # read-to-clear (DS 8, I2C_MST_STATUS)
+            register = (register + 1) & 0x7F
+        return bytes(out)
+
+    _READ_ONLY = {
+        0: {reg.WHO_AM_I, reg.I2C_MST_STATUS, *range(reg.ACCEL_XOUT_H, reg.EXT_SLV_SENS_DATA_00 + 24)},
+        3: {reg.I2C_SLV4_DI},
+    }
+
+    def write(self, register: int, data: Sequence[int], now: float) -> None:
+        self.tick(now)
+        for value in data:
+            self._write_one(register, value, now)
+            register = (register + 1) & 0x7F
+
+    def _write_one(self, register: int, value: int, now: float) -> None:
+        if register == reg.REG_BANK_SEL:
+            self.bank = (value >> reg.BANK_SHIFT) & 0x03
+            return
+        if register in self._READ_ONLY.get(self.bank, ()):
+            return
+        bank = self.banks[self.bank]
+        if self.bank == 0 and register == reg.PWR_MGMT_1:
+            if value & reg.PWR_MGMT_1_DEVICE_RESET:
+                bank[register] = value | reg.PWR_MGMT_1_DEVICE_RESET
+                self.reset_until = now + _RESET_DURATION_S
+                return
+            was_awake = self.awake
+            bank[register] = value
+            if self.awake and not was_awake:
+                self._anchor(now)
+            return
+        if self.bank == 0 and register == reg.USER_CTRL and value & reg.USER_CTRL_I2C_MST_RST:
+            value &= ~reg.USER_CTRL_I2C_MST_RST & 0xFF  # self-clearing
+        bank[register] = value
+        if self.bank == 2 and register == reg.GYRO_SMPLRT_DIV:
+            self._anchor(now)
+
+
+class Icm20948BusEmulator:
+    """An `smbus2.SMBus` stand-in with ICM-20948s on it.
+
+    plant: truth source (`Plant.sensor_truth(name, t)`, gravity and field).
+    clock: time source; plant time = clock() (default time.monotonic). Drive it virtually
+        in tests: nothing here sleeps.
+    sensors: I2C address -> plant sensor name (default 0x68 "base", 0x69 "tip"); leave
+        one out to emulate an absent chip.
+    error_models: sensor name -> ImuErrorModel (default ImuErrorModel()).
+    mounting: sensor name -> unit quaternion (w, x, y, z) of the IMU frame in the plant
+        sensor frame (default identity: the IMU frame is the plant sensor frame).
+    magnetic_disturbance_ut: sensor name -> extra field at that sensor, world frame (uT).
+    seed: seeds the per-chip noise generators and the fault generator.
+    fault_probability: chance that any transaction fails with OSError(EIO).
+    who_am_i: address -> WHO_AM_I value, to emulate a different part at an address
+        (e.g. 0x71, an MPU-9250); default 0xEA.
+    """
+
+    def __init__(
+        self,
+        plant: Plant,
+        clock: Callable[[], float] = time.monotonic,
+        *,
+        sensors: Mapping[int, str] | None = None,
+        error_models: Mapping[str, ImuErrorModel] | None = None,
+        mounting: Mapping[str, Sequence[float]] | None = None,
+        magnetic_disturbance_ut: Mapping[str, Sequence[float]] | None = None,
+        seed: int = 0,
+        fault_probability: float = 0.0,
+        who_am_i: Mapping[int, int] | None = None,
+    ) -> None:
+        if not 0.0 <= fault_probability <= 1.0:
+            raise ValueError(f"fault_probability must be in [0, 1], got {fault_probability}")
+        self.plant = plant
+        self.clock = clock
+        self.who_am_i = dict(who_am_i or {})
+        self._lock = threading.RLock()
+        self._disturbance: dict[str, np.ndarray] = {}
+        for name, vector in (magnetic_disturbance_ut or {}).items():
+            self.set_magnetic_disturbance(name, vector)
+        self.fault_probability = fault_probability
+        self._fault_rng = np.random.default_rng([seed, 0xFA17])
+        self._scheduled_faults: list[tuple[int | None, int]] = []
+        self._detached: set[int] = set()
+        self._pointer: dict[int, int] = {}
+        self.transaction_count = 0
+        models = error_models or {}
+        mounts = mounting or {}
+        self.chips: dict[int, _EmulatedIcm20948] = {}
+        for address, sensor in (sensors if sensors is not None else DEFAULT_SENSORS).items():
+            mount = matrix_from_quat(mounts[sensor]) if sensor in mounts else np.eye(3)
+            self.chips[address] = _EmulatedIcm20948(
+                self, address, sensor, models.get(sensor, ImuErrorModel()), mount, seed
+            )
+
+    # --- test and bench controls --------------------------------------------------------
+
+    def set_magnetic_disturbance(self, sensor: str, field_world_ut: Sequence[float]) -> None:
+        """Add a constant extra field (world frame, uT) at one sensor, e.g. a magnet."""
+        vector = np.asarray(field_world_ut, dtype=float)
+        if vector.shape != (3,) or not np.all(np.isfinite(vector)):
+            raise ValueError(f"magnetic disturbance must be three finite numbers, got {field_world_ut!r}")
+        with self._lock:
+            self._disturbance[sensor] = vector
+
+    def magnetic_disturbance(self, sensor: str) -> np.ndarray:
+        return self._disturbance.get(sensor, np.zeros(3))
+
+    def gyro_bias_rad_s(self, sensor: str) -> np.ndarray:
+        """The true current gyro bias of a sensor's chip (constant + drift so far), rad/s."""
+        with self._lock:
+            for chip in self.chips.values():
+                if chip.sensor == sensor:
+                    return chip.gyro_bias_rad_s().copy()
+        raise KeyError(f"no emulated chip for sensor {sensor!r}")
+
+    def fail_next(self, count: int = 1, *, errno: int = errno_codes.EIO, address: int | None = None) -> None:
+        """Make the next `count` transactions (to `address`, or to any) raise OSError."""
+        with self._lock:
+            self._scheduled_faults.extend([(address, errno)] * count)
+
+    def detach(self, address: int) -> None:
+        """Unplug a chip: it stops acknowledging (its registers keep their state)."""
+        with self._lock:
+            self._detached.add(address)
+
+    def attach(self, address: int) -> None:
+        with self._lock:
+            self._detached.discard(address)
+
+    # --- bus plumbing -----------------------------------------------------------------
+
+    def _device(self, address: int) -> _EmulatedIcm20948:
+        """The chip at `address` after fault injection; OSError like the kernel driver."""
+        self.transaction_count += 1
+        for index, (target, code) in enumerate(self._scheduled_faults):
+            if target is None or target == address:
+                del self._scheduled_faults[index]
+                raise OSError(code, os.strerror(code))
+        if self.fault_probability and self._fault_rng.random() < self.fault_probability:
+            raise OSError(errno_codes.EIO, os.strerror(errno_codes.EIO))
+        chip = self.chips.get(address)
+        if chip is None or address in self._detached:
+            # No ACK on the address byte: i2c-dev reports EREMOTEIO (121).
+            raise OSError(errno_codes.EREMOTEIO, os.strerror(errno_codes.EREMOTEIO))
+        return chip
+
+    @staticmethod
+    def _check_byte(name: str, value: int) -> int:
+        if not isinstance(value, int) or not 0 <= value <= 0xFF:
+            raise ValueError(f"{name} must be an int 0..255, got {value!r}")
+        return value
+
+    # --- the smbus2.SMBus surface -----------------------------------------------------
+
+    def read_byte_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
+        with self._lock:
+            chip = self._device(i2c_addr)
+            return chip.read(self._check_byte("register", register), 1, self.clock())[0]
+
+    def write_byte_data(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> None:
+        with self._lock:
+            chip = self._device(i2c_addr)
+            chip.write(self._check_byte("register", register), [self._check_byte("value", value)], self.clock())
+
+    def read_i2c_block_data(self, i2c_addr: int, register: int, length: int, force: bool | None = None) -> list[int]:
+        if length > reg.SMBUS_BLOCK_MAX:
+            # Same check and message as smbus2 (I2C_SMBUS_BLOCK_MAX).
+            raise ValueError(f"Desired block length over {reg.SMBUS_BLOCK_MAX} bytes")
+        with self._lock:
+            chip = self._device(i2c_addr)
+            if length < 1:
+                raise OSError(errno_codes.EINVAL, os.strerror(errno_codes.EINVAL))
+            return list(chip.read(self._check_byte("register", register), length, self.clock()))
+
+    def write_i2c_block_data(self, i2c_addr: int, register: int, data: Sequence[int], force: bool | None = None) -> None:
+        if len(data) > reg.SMBUS_BLOCK_MAX:
+            raise ValueError(f"Data length cannot exceed {reg.SMBUS_BLOCK_MAX} bytes")
+        values = [self._check_byte("data byte", v) for v in data]
+        with self._lock:
+            chip = self._device(i2c_addr)
+            chip.write(self._check_byte("register", register), values, self.clock())
+
+    def write_byte(self, i2c_addr: int, value: int, force: bool | None = None) -> None:
+        """Set the register pointer (a one-byte write)."""
+        with self._lock:
+            self._device(i2c_addr)
+            self._pointer[i2c_addr] = self._check_byte("value", value)
+
+    def read_byte(self, i2c_addr: int, force: bool | None = None) -> int:
+        """Read at the register pointer, which then advances."""
+        with self._lock:
+            chip = self._device(i2c_addr)
+            register = self._pointer.get(i2c_addr, 0)
+            self._pointer[i2c_addr] = (register + 1) & 0x7F
+            return chip.read(register, 1, self.clock())[0]
+
+    def i2c_rdwr(self, *i2c_msgs: Any) -> None:
+        """Combined transfer of `smbus2.i2c_msg`s: a write sets the register pointer (and
+        writes any further bytes); a read returns bytes from the pointer on."""
+        if len(i2c_msgs) > _MAX_RDWR_MESSAGES:
+            raise OSError(errno_codes.EINVAL, os.strerror(errno_codes.EINVAL))
+        with self._lock:
+            now = self.clock()
+            for message in i2c_msgs:
+                chip = self._device(message.addr)
+                if message.flags & 0x0001:  # I2C_M_RD
+                    register = self._pointer.get(message.addr, 0)
+                    data = chip.read(register, message.len, now)
+                    ctypes.memmove(message.buf, data, message.len)
+                    self._pointer[message.addr] = (register + message.len) & 0x7F
+                else:
+                    payload = bytes(message)
+                    if not payload:
+                        continue
+                    register = payload[0]
+                    if len(payload) > 1:
+                        chip.write(register, payload[1:], now)
+                    self._pointer[message.addr] = (register + len(payload) - 1) & 0x7F
+
+    def close(self) -> None:
+        """Nothing to release (mirrors SMBus.close)."""
+
+    def __enter__(self) -> Icm20948BusEmulator:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
