@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from ..models.problem import RodProblem
 from .base import EffectParameter
+
+if TYPE_CHECKING:
+    from ..models.problem import RodProblem
 
 
 class Gravity:
