@@ -104,7 +104,10 @@ def _curvature(profile, row, load_scale, beta, mx, my, mz):
         kx = profile[row, STIFFNESS]
         ky = profile[row, STIFFNESS + 1]
         # Solve kx (vx + beta |v|^2 vx) = mx (and y alike) by Newton from the linear guess.
-        for _ in range(20):
+        # Softening (beta < 0) caps the moment a section can carry; past the cap there is
+        # no curvature at all, and NaN makes the solver say so instead of guessing.
+        converged = False
+        for _ in range(30):
             s = vx * vx + vy * vy
             fx = kx * (vx + beta * s * vx) - mx
             fy = ky * (vy + beta * s * vy) - my
@@ -118,7 +121,10 @@ def _curvature(profile, row, load_scale, beta, mx, my, mz):
             vx -= dx
             vy -= dy
             if abs(dx) + abs(dy) < 1e-14 * (1.0 + abs(vx) + abs(vy)):
+                converged = True
                 break
+        if not converged or (1.0 + 3.0 * beta * (vx * vx + vy * vy)) <= 0.0:
+            vx = vy = np.nan
     return (load_scale * profile[row, INTRINSIC_CURVATURE] + vx,
             load_scale * profile[row, INTRINSIC_CURVATURE + 1] + vy,
             load_scale * profile[row, INTRINSIC_CURVATURE + 2] + mz * profile[row, COMPLIANCE + 2])

@@ -1,0 +1,159 @@
+"""Solver behaviour: warm starts, load ramping, typed failures, problem caching, and the
+PRB chain against the paper's eq. 16 written with explicit Jacobians."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import ClassVar
+
+import numpy as np
+import pytest
+
+from hydrojet_bench.effects import EffectParameter
+from hydrojet_bench.errors import ConvergenceError
+from hydrojet_bench.geometry import adjoint, se3
+from hydrojet_bench.models import CosseratModel, PrbModel, make_model
+from hydrojet_bench.models.problem import RodProblem
+from hydrojet_bench.params import ModelParameters, with_parameters
+
+ACROSS = ModelParameters(gravity_in_base_m_s2=(-9.81, 0.0, 0.0))
+MODELS = [CosseratModel(), PrbModel()]
+IDS = ["cosserat", "prb"]
+
+
+@pytest.mark.parametrize("model", MODELS, ids=IDS)
+def test_warm_start_changes_speed_not_the_answer(model):
+    nearby = model.solve([0.05, 0.0, 0.0], ACROSS)
+    cold = model.solve([0.052, 0.0, 0.0], ACROSS)
+    warm = model.solve([0.052, 0.0, 0.0], ACROSS, warm_start=nearby)
+    np.testing.assert_allclose(warm.positions_in_base_m, cold.positions_in_base_m, atol=1e-11)
+    np.testing.assert_allclose(warm.rotations_in_base, cold.rotations_in_base, atol=1e-9)
+
+
+@pytest.mark.parametrize("model", MODELS, ids=IDS)
+def test_a_far_away_warm_start_still_finds_the_same_equilibrium(model):
+    far = model.solve([0.0, 0.2, 0.0], ACROSS)
+    cold = model.solve([0.05, 0.0, 0.01], ACROSS)
+    warm = model.solve([0.05, 0.0, 0.01], ACROSS, warm_start=far)
+    np.testing.assert_allclose(warm.tip_position_in_base_m, cold.tip_position_in_base_m, atol=1e-11)
+
+
+@pytest.mark.parametrize("model", MODELS, ids=IDS)
+def test_bends_past_150_degrees_follow_the_branch_continued_from_the_straight_rod(model):
+    solution = model.solve([0.0, 0.3, 0.0], ACROSS)
+    assert solution.bend_angle_deg > 150.0
+    # Stepping the load up by hand, warm-starting each step, lands on the same shape.
+    previous = None
+    for force in np.linspace(0.03, 0.3, 10):
+        previous = model.solve([0.0, force, 0.0], ACROSS, warm_start=previous)
+    np.testing.assert_allclose(solution.tip_position_in_base_m, previous.tip_position_in_base_m, atol=1e-10)
+
+
+@pytest.mark.parametrize("model", MODELS, ids=IDS)
+def test_the_shape_is_orthonormal_and_starts_at_the_clamp(model):
+    solution = model.solve([0.02, 0.04, 0.0], ACROSS)
+    np.testing.assert_allclose(solution.positions_in_base_m[0], 0.0, atol=1e-15)
+    # RK4 does not preserve orthogonality: integrating from an exact tip frame, the clamp
+    # frame drifts by ~1e-7 at this bend; the clamp residual itself is below 1e-10.
+    np.testing.assert_allclose(solution.rotations_in_base[0], np.eye(3), atol=1e-6)
+    for rotation in solution.rotations_in_base:
+        np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-6)
+    # Inextensible: consecutive nodes are exactly one step apart along the arc for the
+    # rod (chord of a smooth curve) and one link apart for the chain.
+    steps = np.linalg.norm(np.diff(solution.positions_in_base_m, axis=0), axis=1)
+    assert steps.sum() == pytest.approx(ACROSS.rod.length_m, rel=1e-3)
+
+
+class Softening:
+    """Test effect: strain softening strong enough that no equilibrium exists for a large
+    load (m = EI(k + beta k^3) with beta < 0 saturates at a finite moment)."""
+
+    name: ClassVar[str] = "softening"
+    explanation: ClassVar[str] = "test only"
+    parameters: ClassVar[tuple[EffectParameter, ...]] = ()
+    uses_actuation: ClassVar[bool] = False
+
+    def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
+        problem.cubic_stiffening_m2 = -4e-4
+
+
+@pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=IDS)
+def test_impossible_equilibrium_raises_a_typed_error_not_a_shape(model_type):
+    model = model_type(effects=(Softening(),))
+    model.solve([0.001, 0.0, 0.0], ModelParameters())  # small loads are fine
+    with pytest.raises(ConvergenceError, match="did not converge"):
+        model.solve([0.5, 0.0, 0.0], ModelParameters())
+
+
+def test_iteration_budget_exhaustion_is_a_convergence_error():
+    model = CosseratModel(max_iterations=1)
+    with pytest.raises(ConvergenceError):
+        model.solve([0.3, 0.0, 0.0], ACROSS)
+
+
+def test_cached_packing_follows_parameter_changes():
+    model = CosseratModel()
+    stiff = with_parameters(ACROSS, {"E0": 6e5, "EL": 4e5})
+    first = model.solve([0.05, 0.0, 0.0], ACROSS)
+    again = model.solve([0.05, 0.0, 0.0], stiff)
+    fresh = CosseratModel().solve([0.05, 0.0, 0.0], stiff)
+    np.testing.assert_allclose(again.tip_position_in_base_m, fresh.tip_position_in_base_m, atol=1e-12)
+    assert np.linalg.norm(first.tip_position_in_base_m - again.tip_position_in_base_m) > 1e-3
+
+
+def test_bad_jet_forces_and_model_names_are_reported():
+    with pytest.raises(ValueError, match="jet_forces_n"):
+        CosseratModel().solve([0.1, float("nan"), 0.0], ACROSS)
+    with pytest.raises(ValueError, match="jet_forces_n"):
+        PrbModel().solve([0.1, 0.0], ACROSS)
+    from hydrojet_bench.errors import UserError
+
+    with pytest.raises(UserError, match="unknown model 'beam'"):
+        make_model("beam")
+
+
+def test_prb_equilibrium_satisfies_eq_16_with_explicit_jacobians():
+    """K theta = tau_f + tau_a (eqs. 14-16) with the joint torques computed the paper's
+    way: one twist per joint axis, transformed by adjoints, dotted with spatial wrenches.
+    Independent of the kernel's moment recursion."""
+    params = ModelParameters(gravity_in_base_m_s2=(-9.81, 2.0, 0.0))
+    links = 8
+    model = PrbModel(links=links)
+    solution = model.solve([0.03, 0.0, 0.04], params)
+    joints = links - 1
+    segment = params.rod.length_m / joints
+    problem = model.build_problem([0.03, 0.0, 0.04], params)
+    positions, rotations = solution.positions_in_base_m, solution.rotations_in_base
+
+    # Loads as spatial wrenches (force, moment about the base origin).
+    wrenches = []
+    weight_per_length = problem.distributed_force_in_base_n_m[0]
+    for a, b in zip(positions[:-1], positions[1:]):  # links run clamp-joint-...-joint-tip
+        force = weight_per_length * np.linalg.norm(b - a)
+        centre = 0.5 * (a + b)
+        wrenches.append(np.concatenate([force, np.cross(centre, force)]))
+    tip_rotation = rotations[-1]
+    tip_force = tip_rotation @ (problem.actuation_matrix() @ problem.jet_forces_n)
+    com = positions[-1] + tip_rotation @ np.asarray(params.capsule.center_of_mass_in_tip_m)
+    capsule_weight = problem.tip_dead_force_in_base_n
+    wrenches.append(np.concatenate([tip_force, np.cross(positions[-1], tip_force)]))
+    wrenches.append(np.concatenate([capsule_weight, np.cross(com, capsule_weight)]))
+    # Which loads lie beyond joint j: link j onwards (links 0..joints), the tip loads always.
+    for joint in range(1, joints + 1):
+        distal_rotation = rotations[joint]
+        joint_pose = se3(distal_rotation, positions[joint])
+        # Body-frame unit twists of the joint axes, mapped to spatial twists (eq. 12).
+        spatial_twists = [adjoint(joint_pose) @ np.concatenate([np.zeros(3), axis]) for axis in np.eye(3)]
+        beyond = wrenches[joint:]
+        torque = np.array([sum(twist @ wrench for wrench in beyond) for twist in spatial_twists])
+        # theta_j from the relative rotation of the links either side.
+        relative = rotations[joint - 1].T @ rotations[joint]
+        angle = np.arccos(np.clip((np.trace(relative) - 1) / 2, -1, 1))
+        axis = np.array([relative[2, 1] - relative[1, 2], relative[0, 2] - relative[2, 0],
+                         relative[1, 0] - relative[0, 1]]) / (2 * np.sin(angle))
+        theta = angle * axis
+        s_joint = (joint - 0.5) * segment
+        stiffness = params.rod.youngs_modulus_pa(s_joint) * params.rod.second_moment_m4 / segment
+        torsion = params.rod.shear_modulus_pa(s_joint) * params.rod.polar_moment_m4 / segment
+        elastic = np.array([stiffness, stiffness, torsion]) * theta
+        np.testing.assert_allclose(elastic, torque, rtol=1e-6, atol=1e-12)
