@@ -230,10 +230,23 @@ def _tip_state(x, reference, tip, load_scale, y, work):
 
 @njit(cache=True)
 def _store_node(y, index, nodes_p, nodes_r):
+    """Store a node, its frame re-orthonormalised (Gram-Schmidt from the tangent): RK4
+    lets R drift off SO(3) by ~1e-6 over a large bend, which users should not see."""
     for i in range(3):
         nodes_p[index, i] = y[i]
-        for j in range(3):
-            nodes_r[index, i, j] = y[3 + 3 * i + j]
+    zx, zy, zz = y[5], y[8], y[11]
+    norm = np.sqrt(zx * zx + zy * zy + zz * zz)
+    zx, zy, zz = zx / norm, zy / norm, zz / norm
+    xx, xy, xz = y[3], y[6], y[9]
+    dot = xx * zx + xy * zy + xz * zz
+    xx, xy, xz = xx - dot * zx, xy - dot * zy, xz - dot * zz
+    norm = np.sqrt(xx * xx + xy * xy + xz * xz)
+    xx, xy, xz = xx / norm, xy / norm, xz / norm
+    nodes_r[index, 0, 0], nodes_r[index, 1, 0], nodes_r[index, 2, 0] = xx, xy, xz
+    nodes_r[index, 0, 1] = zy * xz - zz * xy
+    nodes_r[index, 1, 1] = zz * xx - zx * xz
+    nodes_r[index, 2, 1] = zx * xy - zy * xx
+    nodes_r[index, 0, 2], nodes_r[index, 1, 2], nodes_r[index, 2, 2] = zx, zy, zz
 
 
 @njit(cache=True, fastmath=_HOT)
