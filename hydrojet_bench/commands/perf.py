@@ -1,0 +1,131 @@
+"""`hydrojet-bench perf`: speed benchmarks of the hot paths, as JSON.
+
+Medians over many runs after a warm-up, on the HydroJet-like problem of the kinematics
+issue: L 70 mm, radius 4.5 mm, E 3e5 -> 2e5 Pa, gravity across the rod, a 0.05 N jet.
+Targets are reported beside each figure; a miss is reported, never hidden. Timings are
+for this machine at this moment: shared machines are noisy, which is why no unit test
+asserts a time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import UserError
+
+TARGETS_US = {
+    "cosserat_warm_solve": 20.0,
+    "cosserat_cold_solve": 500.0,
+    "prb_warm_solve": 300.0,
+    "sensitivity_6_columns": 100.0,
+}
+SPEEDUP_TARGET = 300.0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("perf", help="benchmark the model kernels (JSON)")
+    parser.add_argument("--json", metavar="FILE", type=Path, help="also write the figures to FILE")
+    parser.add_argument("--runs", type=int, default=500, help="timed runs per figure (default 500, min 200)")
+    parser.set_defaults(func=run)
+
+
+def _median_us(function: Callable[[], object], runs: int, warmup: int = 50) -> float:
+    for _ in range(warmup):
+        function()
+    samples = []
+    for _ in range(runs):
+        start = time.perf_counter()
+        function()
+        samples.append(time.perf_counter() - start)
+    return statistics.median(samples) * 1e6
+
+
+def benchmark(runs: int) -> dict:
+    started = time.perf_counter()
+    # Imported here so the first-import (numba cache load or compile) cost is measured.
+    from ..models import CosseratModel, PrbModel
+    from ..models.reference import solve_reference
+    from ..params import DISTURBANCE_NAMES, ModelParameters
+    from ..sensitivity import sensitivity
+
+    params = ModelParameters(gravity_in_base_m_s2=(-9.81, 0.0, 0.0))
+    jets = np.array([0.05, 0.0, 0.0])
+    jets_changed = jets * 1.04
+    cosserat, prb = CosseratModel(), PrbModel()
+    first_solve_started = time.perf_counter()
+    nominal = cosserat.solve(jets, params)
+    first_solve_s = time.perf_counter() - first_solve_started
+    prb_nominal = prb.solve(jets, params)
+    sensitivity(cosserat, jets, params, DISTURBANCE_NAMES, nominal=nominal)
+    import_and_first_solve_s = time.perf_counter() - started
+
+    figures = {
+        "cosserat_warm_solve": _median_us(lambda: cosserat.solve(jets_changed, params, warm_start=nominal), runs),
+        "cosserat_cold_solve": _median_us(lambda: cosserat.solve(jets_changed, params), runs),
+        "prb_warm_solve": _median_us(lambda: prb.solve(jets_changed, params, warm_start=prb_nominal), runs),
+        "sensitivity_6_columns": _median_us(
+            lambda: sensitivity(cosserat, jets, params, DISTURBANCE_NAMES, nominal=nominal), runs),
+    }
+    warm = cosserat.solve(jets_changed, params, warm_start=nominal)
+
+    # The same problem by collocation: cold (ramped from the straight rod) and warm
+    # (seeded with the collocation solution for the previous load).
+    reference_runs = max(5, runs // 50)
+    previous_mesh = solve_reference(cosserat.build_problem(jets, params))
+    problem = cosserat.build_problem(jets_changed, params)
+    mesh, states = solve_reference(problem, initial_guess=previous_mesh)
+    reference_warm_us = _median_us(lambda: solve_reference(problem, initial_guess=previous_mesh),
+                                   reference_runs, warmup=1)
+    reference_cold_us = _median_us(lambda: solve_reference(problem), max(3, reference_runs // 3), warmup=0)
+    tip_difference_mm = float(np.linalg.norm(warm.tip_position_in_base_m - states[0:3, -1]) * 1e3)
+
+    results = {
+        name: {"median_us": round(value, 2), "target_us": TARGETS_US[name], "met": value <= TARGETS_US[name]}
+        for name, value in figures.items()
+    }
+    speedup = reference_warm_us / figures["cosserat_warm_solve"]
+    results["solve_bvp_comparison"] = {
+        "solve_bvp_warm_us": round(reference_warm_us, 1),
+        "solve_bvp_cold_us": round(reference_cold_us, 1),
+        "solve_bvp_nodes": int(mesh.size),
+        "tip_difference_mm": tip_difference_mm,
+        "tip_difference_target_mm": 0.01,
+        "speedup_warm": round(speedup, 1),
+        "speedup_target": SPEEDUP_TARGET,
+        "met": bool(tip_difference_mm <= 0.01 and speedup >= SPEEDUP_TARGET),
+    }
+    results["numba"] = {
+        "import_and_first_solves_s": round(import_and_first_solve_s, 3),
+        "first_cosserat_solve_s": round(first_solve_s, 3),
+        "note": "kernels are compiled with cache=True: the first run on a fresh clone compiles "
+                "(several seconds); later runs load the cache from __pycache__",
+    }
+    results["setup"] = {
+        "runs": runs, "jet_forces_n": jets.tolist(), "warm_start_load_change": 0.04,
+        "rod": "L 70 mm, radius 4.5 mm, E 3e5 -> 2e5 Pa, capsule 2.5 g, gravity across",
+        "python": sys.version.split()[0], "cpus": os.cpu_count(),
+    }
+    return results
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.runs < 200:
+        raise UserError(f"--runs must be at least 200 (got {args.runs}): medians of fewer are noise")
+    results = benchmark(args.runs)
+    text = json.dumps(results, indent=2)
+    print(text)
+    if args.json:
+        try:
+            args.json.write_text(text + "\n")
+        except OSError as error:
+            raise UserError(f"cannot write {args.json}: {error.strerror}") from None
+    return 0
