@@ -1,0 +1,188 @@
+"""The effect interface: loading users' effects from files, and every kind of hook the
+analysis library needs (loads, tip wrench, constitutive law, actuation map, base
+boundary with memory, measurement), each working in both models."""
+
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+import pytest
+
+from hydrojet_bench.effects import LIBRARY, load_effect
+from hydrojet_bench.errors import UserError
+from hydrojet_bench.geometry import so3_exp
+from hydrojet_bench.models import CosseratModel, PrbModel
+from hydrojet_bench.params import ModelParameters
+
+USER_EFFECT = textwrap.dedent('''
+    import numpy as np
+    from hydrojet_bench.effects import EffectParameter
+
+    class TorsionalPreload:
+        """A twisting moment from the water lines, per unit length."""
+        name = "torsional_preload"
+        explanation = "the water lines twist the rod"
+        parameters = (EffectParameter("moment_per_length_nm_m", 0.0, -0.1, 0.1, "N m/m", "twist"),)
+        uses_actuation = False
+
+        def apply(self, problem, values):
+            problem.distributed_moment_in_body_nm_m[:, 2] += values["moment_per_length_nm_m"]
+    ''')
+
+MODELS = [CosseratModel, PrbModel]
+IDS = ["cosserat", "prb"]
+PARAMS = ModelParameters(gravity_in_base_m_s2=(-9.81, 0.0, 0.0))
+
+
+def write(tmp_path, text):
+    path = tmp_path / "my_effect.py"
+    path.write_text(text)
+    return path
+
+
+def test_library_names_load_and_explain_themselves():
+    gravity = load_effect("gravity")
+    assert gravity.name == "gravity" and "gravity" in LIBRARY
+    assert len(gravity.explanation) > 100
+    assert [p.name for p in gravity.parameters] == ["weight_scale"]
+
+
+@pytest.mark.parametrize("model_type", MODELS, ids=IDS)
+def test_a_users_effect_from_a_file_changes_the_shape(tmp_path, model_type):
+    effect = load_effect(f"{write(tmp_path, USER_EFFECT)}:TorsionalPreload")
+    assert effect.name == "torsional_preload"
+    model = model_type(effects=("gravity", effect))
+    plain = model_type().solve([0.05, 0.0, 0.0], PARAMS)
+    twisted_params = ModelParameters(gravity_in_base_m_s2=(-9.81, 0.0, 0.0),
+                                     effect_values={"torsional_preload.moment_per_length_nm_m": 0.002})
+    same = model.solve([0.05, 0.0, 0.0], PARAMS)  # default 0: no change
+    twisted = model.solve([0.05, 0.0, 0.0], twisted_params)
+    np.testing.assert_allclose(same.tip_position_in_base_m, plain.tip_position_in_base_m, atol=1e-12)
+    assert np.linalg.norm(twisted.tip_position_in_base_m - plain.tip_position_in_base_m) > 1e-3
+
+
+@pytest.mark.parametrize("spec_suffix, text, message", [
+    ("Missing", USER_EFFECT, "defines no class 'Missing'"),
+    ("Broken", "raise RuntimeError('boom')\n", "importing .* failed: RuntimeError: boom"),
+    ("Bare", "class Bare:\n    pass\n", "lacks name, explanation, parameters, uses_actuation, apply"),
+])
+def test_bad_effect_files_give_clear_errors(tmp_path, spec_suffix, text, message):
+    with pytest.raises(UserError, match=message):
+        load_effect(f"{write(tmp_path, text)}:{spec_suffix}")
+
+
+def test_unknown_names_and_missing_files_are_user_errors(tmp_path):
+    with pytest.raises(UserError, match="unknown effect 'gravty'; known effects: gravity"):
+        load_effect("gravty")
+    with pytest.raises(UserError, match="does not exist"):
+        load_effect(f"{tmp_path}/nope.py:Thing")
+
+
+class Hook:
+    """A test effect whose `apply` is a given function of (problem, values)."""
+
+    explanation = "test hook"
+    parameters = ()
+
+    def __init__(self, name, function, uses_actuation=False):
+        self.name, self.function, self.uses_actuation = name, function, uses_actuation
+
+    def apply(self, problem, values):
+        self.function(problem)
+
+
+def solve(model_type, hook, jets=(0.05, 0.0, 0.0), **kwargs):
+    return model_type(effects=("gravity", hook)).solve(jets, PARAMS, **kwargs)
+
+
+@pytest.mark.parametrize("model_type", MODELS, ids=IDS)
+def test_constitutive_hooks_stiffen_the_rod(model_type):
+    base = model_type().solve([0.05, 0.0, 0.0], PARAMS).bend_angle_deg
+
+    def stiffer_near_tip(problem):  # a stiffness profile along s
+        factor = 1.0 + problem.arc_length_m / problem.arc_length_m[-1]
+        problem.bending_stiffness_x_nm2 = problem.bending_stiffness_x_nm2 * factor
+        problem.bending_stiffness_y_nm2 = problem.bending_stiffness_y_nm2 * factor
+
+    def strain_stiffening(problem):  # a law depending on curvature
+        problem.cubic_stiffening_m2 = 1e-3
+
+    def pressure_stiffening(problem):  # a law depending on actuation
+        factor = 1.0 + 10.0 * problem.jet_forces_n.sum()
+        problem.bending_stiffness_x_nm2 = problem.bending_stiffness_x_nm2 * factor
+        problem.bending_stiffness_y_nm2 = problem.bending_stiffness_y_nm2 * factor
+
+    for hook in (Hook("profile", stiffer_near_tip), Hook("cubic", strain_stiffening),
+                 Hook("pressure", pressure_stiffening, uses_actuation=True)):
+        assert solve(model_type, hook).bend_angle_deg < base - 1.0, hook.name
+    # An actuation-dependent effect is re-applied for every jet command.
+    model = model_type(effects=("gravity", Hook("pressure", pressure_stiffening, uses_actuation=True)))
+    low, high = (model.solve([q, 0.0, 0.0], PARAMS) for q in (0.02, 0.1))
+    fresh_high = model_type(effects=("gravity", Hook("pressure", pressure_stiffening, uses_actuation=True)))
+    np.testing.assert_allclose(high.tip_position_in_base_m,
+                               fresh_high.solve([0.1, 0.0, 0.0], PARAMS).tip_position_in_base_m, atol=1e-12)
+
+
+@pytest.mark.parametrize("model_type", MODELS, ids=IDS)
+def test_actuation_map_hooks(model_type):
+    def clogged_jet_1(problem):
+        problem.jet_gains = np.array([0.5, 1.0, 1.0])
+
+    clogged = solve(model_type, Hook("gain", clogged_jet_1))
+    halved = model_type().solve([0.025, 0.0, 0.0], PARAMS)
+    np.testing.assert_allclose(clogged.tip_position_in_base_m, halved.tip_position_in_base_m, atol=1e-12)
+
+
+@pytest.mark.parametrize("model_type", MODELS, ids=IDS)
+def test_tip_wrench_hook_matches_the_disturbance_parameter(model_type):
+    def push(problem):
+        problem.tip_follower_force_in_tip_n = problem.tip_follower_force_in_tip_n + [0.0, 0.01, 0.0]
+
+    pushed = solve(model_type, Hook("push", push))
+    from hydrojet_bench.params import with_parameters
+
+    disturbed = model_type().solve([0.05, 0.0, 0.0], with_parameters(PARAMS, {"wd_fy": 0.01}))
+    np.testing.assert_allclose(pushed.tip_position_in_base_m, disturbed.tip_position_in_base_m, atol=1e-12)
+
+
+@pytest.mark.parametrize("model_type", MODELS, ids=IDS)
+def test_base_boundary_hooks_compliance_and_hysteresis(model_type):
+    def compliant(problem):
+        problem.base_compliance_rad_per_nm = np.array([20.0, 20.0, 20.0])
+
+    rigid = model_type().solve([0.05, 0.0, 0.0], PARAMS)
+    soft = solve(model_type, Hook("compliant", compliant))
+    assert np.linalg.norm(soft.base_rotation_vector_rad) > 0.01
+    np.testing.assert_allclose(so3_exp(soft.base_rotation_vector_rad), soft.rotations_in_base[0], atol=1e-6)
+    assert soft.bend_angle_deg > rigid.bend_angle_deg
+
+    def play(problem):
+        compliant(problem)
+        problem.base_play_rad = 0.02
+
+    model = model_type(effects=("gravity", Hook("play", play)))
+    up, down, previous = {}, {}, None
+    for q in (0.0, 0.02, 0.04, 0.06, 0.04, 0.02, 0.0):
+        previous = model.solve([q, 0.0, 0.0], PARAMS, previous=previous)
+        (down if q in up else up)[q] = previous
+    # Loading and unloading through the same force leave the clamp (and tip) elsewhere.
+    gap = np.linalg.norm(up[0.02].tip_position_in_base_m - down[0.02].tip_position_in_base_m)
+    assert gap > 1e-4
+    # Without a history the result is the loading branch from rest.
+    fresh = model.solve([0.02, 0.0, 0.0], PARAMS)
+    assert np.linalg.norm(fresh.base_rotation_vector_rad) < np.linalg.norm(down[0.02].base_rotation_vector_rad) + 0.05
+
+
+@pytest.mark.parametrize("model_type", MODELS, ids=IDS)
+def test_measurement_hook_rotates_the_sensor_not_the_body(model_type):
+    mounting = so3_exp([0.0, 0.0, 0.2])
+
+    def mounted(problem):
+        problem.tip_sensor_mounting = mounting
+
+    plain = model_type().solve([0.05, 0.0, 0.0], PARAMS)
+    measured = solve(model_type, Hook("mount", mounted))
+    np.testing.assert_allclose(measured.positions_in_base_m, plain.positions_in_base_m, atol=1e-12)
+    np.testing.assert_allclose(measured.tip_sensor_in_base_sensor(), plain.tip_sensor_in_base_sensor() @ mounting,
+                               atol=1e-12)
