@@ -18,7 +18,7 @@ from . import __version__
 from .errors import UserError
 
 # Order is the order shown in --help.
-COMMAND_MODULES = ("demo", "perf")
+COMMAND_MODULES = ("demo", "perf", "emulate")
 
 
 def build_parser() -> argparse.ArgumentParser:
