@@ -617,3 +617,41 @@ def body_twist(rotation_a, position_a, rotation_b, position_b, out):
     out[3] = ox
     out[4] = oy
     out[5] = oz
+
+
+@njit(cache=True)
+def tip_wrench_sensitivity(kind, resolution, reference, nominal_position, jacobian, profile, tip, base, beta,
+                           tolerance, max_iterations, components, steps, length, nodes_p, nodes_r, columns, info):
+    """Forward-difference sensitivity of the tip pose to tip follower wrench components
+    (w_d: 0-2 force, 3-5 moment, tip frame), all columns in one call.
+
+    ``reference``, ``nominal_position`` (in units of ``length``) and ``jacobian``: the
+    nominal tip pose and an accurate Jacobian there. ``steps``: nondimensional step per
+    component. Each column is the body twist (v in units of ``length``, omega) from the
+    nominal tip pose to the perturbed one, divided by the step. ``info[0]`` gets the
+    first failing status, or CONVERGED."""
+    clamp_state = np.empty(18)
+    column_info = np.empty(4)
+    anchor = np.empty((3, 3))
+    trial_jacobian = np.empty((3, 3))
+    twist = np.empty(6)
+    perturbed_position = np.empty(3)
+    perturbed_tip = tip.copy()
+    info[0] = CONVERGED
+    for column in range(components.shape[0]):
+        index = TIP_FOLLOWER_FORCE + components[column]
+        perturbed_tip[index] = tip[index] + steps[column]
+        anchor[:, :] = reference
+        trial_jacobian[:, :] = jacobian
+        solve(kind, resolution, anchor, trial_jacobian, True, profile, perturbed_tip, base, beta, 1.0,
+              tolerance, max_iterations, nodes_p, nodes_r, clamp_state, column_info)
+        perturbed_tip[index] = tip[index]
+        if column_info[0] != CONVERGED:
+            info[0] = column_info[0]
+            return
+        # The shot puts the tip at the origin: the tip relative to the clamp is -p(0).
+        for k in range(3):
+            perturbed_position[k] = -clamp_state[k] * length
+        body_twist(reference, nominal_position, nodes_r[nodes_r.shape[0] - 1], perturbed_position, twist)
+        for k in range(6):
+            columns[k, column] = twist[k] / steps[column]

@@ -284,6 +284,22 @@ class ShootingModel:
                             prepared.tip, prepared.base, prepared.beta, jacobian)
         return replace(solution, jacobian=jacobian)
 
+    def tip_wrench_columns(self, prepared: PreparedProblem, seed: Solution, components: np.ndarray,
+                           steps: np.ndarray) -> np.ndarray:
+        """(6, k) tip twists per nondimensional step of tip follower wrench components
+        (0-2 force, 3-5 moment), solved from ``seed`` (which should carry an accurate
+        Jacobian, see `with_accurate_jacobian`). Used by `sensitivity`."""
+        work = _Workspace(len(prepared.node_arc_length_m))
+        columns = np.empty((6, len(components)))
+        kernels.tip_wrench_sensitivity(self.kind, self.resolution, seed.tip_rotation_in_base,
+                                       seed.tip_position_in_base_m, seed.jacobian,
+                                       prepared.profile, prepared.tip, prepared.base, prepared.beta, self.tolerance,
+                                       self.max_iterations, components, steps, prepared.length_m, work.nodes_p,
+                                       work.nodes_r, columns, work.info)
+        if work.info[0] != kernels.CONVERGED:
+            raise ConvergenceError(f"{self.name} model did not converge for a perturbed disturbance wrench")
+        return columns
+
     def _ramp(self, prepared: PreparedProblem, stages: int, work: "_Workspace") -> Solution | None:
         """Continuation: scale every load from 1/stages up to 1, each stage seeded by the last."""
         reference = np.eye(3)
