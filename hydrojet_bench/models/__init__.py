@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
-from collections.abc import Sequence
-
+from ..errors import UserError
 from ..params import ModelParameters
 from .problem import RodProblem
 from .shooting import CosseratModel, PrbModel, PreparedProblem, ShootingModel, Solution
@@ -32,6 +32,4 @@ def make_model(name: str, effects: Sequence = ("gravity",)) -> ShootingModel:
     try:
         return MODELS[name](effects)
     except KeyError:
-        from ..errors import UserError
-
         raise UserError(f"unknown model {name!r}; choose one of: {', '.join(MODELS)}") from None

@@ -115,14 +115,12 @@ class PreparedProblem:
     force_scale_n: float
     moment_scale_nm: float
     node_arc_length_m: np.ndarray
-
-    @property
-    def wrench_scale(self) -> np.ndarray:
-        return np.repeat([self.force_scale_n, self.moment_scale_nm], 3)
+    wrench_scale: np.ndarray
 
     def _replace_tip(self, tip: np.ndarray) -> "PreparedProblem":
         return PreparedProblem(self.problem, self.profile, tip, self.base, self.beta, self.length_m,
-                               self.force_scale_n, self.moment_scale_nm, self.node_arc_length_m)
+                               self.force_scale_n, self.moment_scale_nm, self.node_arc_length_m,
+                               self.wrench_scale)
 
     def with_jets(self, jet_forces_n: np.ndarray) -> "PreparedProblem":
         tip = self.tip.copy()
@@ -237,7 +235,8 @@ class ShootingModel:
         if not (np.all(np.isfinite(tip)) and np.all(np.isfinite(base))):
             raise ValueError("effects produced a non-finite tip load or clamp parameter")
         return PreparedProblem(problem, profile, tip, base, problem.cubic_stiffening_m2 / length**2,
-                               length, force_scale, moment_scale, self.node_arc_length_m(length))
+                               length, force_scale, moment_scale, self.node_arc_length_m(length),
+                               np.repeat([force_scale, moment_scale], 3))
 
     # --- solving ------------------------------------------------------------------
 
