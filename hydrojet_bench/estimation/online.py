@@ -1,0 +1,145 @@
+"""Online disturbance estimation (paper sec. II-A, eq. 4).
+
+At each quasistatic step the model predicts the tip sensor's orientation relative to the
+base sensor; the measured one differs by a body-frame rotation omega_des. The disturbance
+moment w_d|m is corrected by damped least squares on the rotation rows of the
+sensitivity matrix,
+
+    delta w_m = lambda * S^T (S S^T + mu I)^-1 * omega_des,
+
+and the model is solved again, up to ``iterations`` times per step or until the error
+is below ``tolerance_deg``. The estimate carries over to the next step.
+
+The paper prints ``(S S^T - mu I)^-1``. With a minus sign the "damping" would make the
+matrix singular whenever mu reaches an eigenvalue of S S^T and reverse the update
+beyond it; damped least squares (Levenberg, Nakamura) adds mu, so we do.
+
+mu has units of S S^T, (rad per N m)^2, which depend on the rod; it is set relative to
+the largest eigenvalue of S S^T (``damping``), so one default works for any rod.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..geometry import body_rotation_error, matrix_from_quat, quat_from_matrix, rotation_angle_deg
+from ..params import DISTURBANCE_MOMENT_NAMES, DisturbanceWrench, ModelParameters
+from ..sensitivity import sensitivity
+
+if TYPE_CHECKING:
+    from ..models.shooting import ShootingModel, Solution
+
+
+@dataclass(frozen=True)
+class OnlineSettings:
+    """gain: the paper's lambda (0.4). damping: mu as a fraction of the largest
+    eigenvalue of S S^T. iterations: model updates per quasistatic step (the paper
+    reports one to two; one per sample in per-sample mode). tolerance_deg: stop
+    iterating once the orientation error is below this (deg)."""
+
+    gain: float = 0.4
+    damping: float = 1e-3
+    iterations: int = 2
+    tolerance_deg: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.gain <= 1.0:
+            raise ValueError(f"estimator.gain must be in (0, 1], got {self.gain}")
+        if not 0.0 <= self.damping < 1.0:
+            raise ValueError(f"estimator.damping must be in [0, 1), got {self.damping}")
+        if self.iterations < 1:
+            raise ValueError(f"estimator.iterations must be >= 1, got {self.iterations}")
+        if not self.tolerance_deg >= 0.0:
+            raise ValueError(f"estimator.tolerance_deg must be >= 0, got {self.tolerance_deg}")
+
+
+@dataclass(frozen=True)
+class EstimateStep:
+    """One step of the estimator.
+
+    error_before_deg / error_after_deg: angle between predicted and measured tip-relative-
+    to-base orientation before the first and after the last update of this step.
+    disturbance_moment_nm: the estimate after this step (tip frame, N m).
+    solution: the model's shape with that estimate (the "Proposed" prediction).
+    """
+
+    error_before_deg: float
+    error_after_deg: float
+    iterations: int
+    disturbance_moment_nm: np.ndarray
+    solution: Solution
+
+
+class OnlineDisturbanceEstimator:
+    """Tracks w_d|m from a stream of (jet forces, measured orientation) pairs.
+
+    params: the calibrated parameters; their w_d is the starting estimate. Only the
+    moment is updated, as in the paper; the calibrated force stays.
+    """
+
+    def __init__(self, model: ShootingModel, params: ModelParameters,
+                 settings: OnlineSettings = OnlineSettings()) -> None:
+        self.model = model
+        self.settings = settings
+        self.params = params
+        self._previous: Solution | None = None
+
+    @property
+    def disturbance_moment_nm(self) -> np.ndarray:
+        return np.array(self.params.disturbance.moment_nm)
+
+    def reset(self, params: ModelParameters | None = None) -> None:
+        """Forget the path and, if given, restart from ``params``' disturbance."""
+        if params is not None:
+            self.params = params
+        self._previous = None
+
+    def update(self, jet_forces_n, measured_tip_in_base_sensor: np.ndarray, *,
+               gravity_in_base_m_s2=None, iterations: int | None = None) -> EstimateStep:
+        """Correct the estimate with one measurement.
+
+        measured_tip_in_base_sensor: 3x3 rotation of the tip sensor in the base sensor's
+            frame, or a quaternion (w, x, y, z).
+        gravity_in_base_m_s2: gravity in the base frame now, when the base moves.
+        iterations: override ``settings.iterations`` (per-sample mode passes 1).
+        """
+        measured = np.asarray(measured_tip_in_base_sensor, dtype=float)
+        if measured.shape == (4,):
+            measured = matrix_from_quat(measured)
+        if gravity_in_base_m_s2 is not None:
+            self.params = replace(self.params, gravity_in_base_m_s2=tuple(gravity_in_base_m_s2))
+        budget = self.settings.iterations if iterations is None else iterations
+        solution = self._solve(jet_forces_n)
+        error_before = self._error_deg(solution, measured)
+        error = error_before
+        done = 0
+        while done < budget and error > self.settings.tolerance_deg:
+            # omega_des in the tip sensor's frame; the sensitivity is in the rod tip's frame.
+            omega_sensor = body_rotation_error(solution.tip_sensor_in_base_sensor(), measured)
+            omega_tip = solution.tip_sensor_mounting @ omega_sensor
+            matrix = sensitivity(self.model, jet_forces_n, self.params, DISTURBANCE_MOMENT_NAMES,
+                                 nominal=solution, previous=self._previous).rotation_rows
+            gram = matrix @ matrix.T
+            mu = self.settings.damping * np.linalg.eigvalsh(gram)[-1]
+            step = self.settings.gain * matrix.T @ np.linalg.solve(gram + mu * np.eye(3), omega_tip)
+            self._set_moment(self.disturbance_moment_nm + step)
+            solution = self._solve(jet_forces_n, warm_start=solution)
+            error = self._error_deg(solution, measured)
+            done += 1
+        self._previous = solution
+        return EstimateStep(error_before, error, done, self.disturbance_moment_nm, solution)
+
+    def _solve(self, jet_forces_n, warm_start: Solution | None = None) -> Solution:
+        return self.model.solve(jet_forces_n, self.params, previous=self._previous,
+                                warm_start=warm_start if warm_start is not None else self._previous)
+
+    def _set_moment(self, moment_nm: np.ndarray) -> None:
+        disturbance = DisturbanceWrench(self.params.disturbance.force_n, tuple(moment_nm))
+        self.params = replace(self.params, disturbance=disturbance)
+
+    @staticmethod
+    def _error_deg(solution: Solution, measured: np.ndarray) -> float:
+        return float(rotation_angle_deg(solution.tip_sensor_quaternion(), quat_from_matrix(measured)))
