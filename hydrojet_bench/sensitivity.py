@@ -50,7 +50,7 @@ class Sensitivity:
         return self.matrix[3:]
 
 
-def _effect_parameter(model: ShootingModel, name: str) -> EffectParameter | None:
+def effect_parameter(model: ShootingModel, name: str) -> EffectParameter | None:
     """The enabled effect parameter called ``effect.parameter``, if any."""
     effect_name, _, parameter_name = name.partition(".")
     for effect in model.effects:
@@ -65,7 +65,7 @@ def parameter_scale(model: ShootingModel, name: str) -> float:
     """Typical magnitude of a parameter, for steps and optimiser scaling."""
     if name in PARAMETER_SCALES:
         return PARAMETER_SCALES[name]
-    parameter = _effect_parameter(model, name)
+    parameter = effect_parameter(model, name)
     if parameter is None:
         raise KeyError(f"parameter {name!r} belongs to no enabled effect of {model!r}")
     return max(abs(parameter.upper - parameter.lower) / 10.0, 1e-12)
@@ -99,8 +99,8 @@ def sensitivity(model: ShootingModel, jet_forces_n: Sequence[float], params: Mod
     steps = np.empty(len(names))
     for column, name in enumerate(names):
         scale = parameter_scale(model, name)
-        effect_parameter = _effect_parameter(model, name)
-        value = get_parameter(params, name, effect_parameter.default if effect_parameter else None)
+        known = effect_parameter(model, name)
+        value = get_parameter(params, name, known.default if known else None)
         steps[column] = relative_step * max(abs(value), scale)
     # w_d only enters the tip wrench: its forward-difference columns are solved in one
     # kernel call on the packed problem (the online estimator's hot path).
@@ -119,8 +119,8 @@ def sensitivity(model: ShootingModel, jet_forces_n: Sequence[float], params: Mod
                 perturbed_problem = prepared.with_disturbance_offset(DISTURBANCE_NAMES.index(name), offset)
                 solution = model.solve_prepared(perturbed_problem, seed)
             else:
-                effect_parameter = _effect_parameter(model, name)
-                value = get_parameter(params, name, effect_parameter.default if effect_parameter else None)
+                known = effect_parameter(model, name)
+                value = get_parameter(params, name, known.default if known else None)
                 perturbed = with_parameters(params, {name: value + offset})
                 solution = model.solve(jet_forces_n, perturbed, previous=previous, warm_start=seed)
             twists.append(tip_twist(nominal, solution))
