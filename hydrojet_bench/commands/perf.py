@@ -27,7 +27,9 @@ TARGETS_US = {
     "cosserat_cold_solve": 500.0,
     "prb_warm_solve": 300.0,
     "sensitivity_6_columns": 100.0,
+    "online_update_cosserat": 200.0,
 }
+CALIBRATION_TARGETS_S = {"cosserat": 0.5, "prb": 5.0}
 SPEEDUP_TARGET = 300.0
 
 
@@ -75,6 +77,7 @@ def benchmark(runs: int) -> dict:
         "sensitivity_6_columns": _median_us(
             lambda: sensitivity(cosserat, jets, params, DISTURBANCE_NAMES, nominal=nominal), runs),
     }
+    figures["online_update_cosserat"] = _online_update_us(cosserat, params, runs)
     warm = cosserat.solve(jets_changed, params, warm_start=nominal)
 
     # The same problem by collocation: cold (ramped from the straight rod) and warm
@@ -103,6 +106,7 @@ def benchmark(runs: int) -> dict:
         "speedup_target": SPEEDUP_TARGET,
         "met": bool(tip_difference_mm <= 0.01 and speedup >= SPEEDUP_TARGET),
     }
+    results["calibration_40_poses_9_parameters"] = _calibration_figures(params)
     results["numba"] = {
         "import_and_first_solves_s": round(import_and_first_solve_s, 3),
         "first_cosserat_solve_s": round(first_solve_s, 3),
@@ -115,6 +119,54 @@ def benchmark(runs: int) -> dict:
         "python": sys.version.split()[0], "cpus": os.cpu_count(),
     }
     return results
+
+
+def _online_update_us(model, params, runs: int) -> float:
+    """One estimator update (solve, sensitivity, step, re-solve) on a steady 0.7 degree
+    discrepancy: the estimate is reset each time so every run does the same work."""
+    from ..estimation import OnlineDisturbanceEstimator, OnlineSettings
+    from ..geometry import so3_exp
+
+    jets = np.array([0.05, 0.0, 0.02])
+    measured = model.solve(jets, params).tip_sensor_in_base_sensor() @ so3_exp(np.radians([0.5, 0.5, 0.0]))
+    estimator = OnlineDisturbanceEstimator(model, params, OnlineSettings(iterations=1, tolerance_deg=0.0))
+    warm = model.solve(jets, params)
+
+    def update() -> None:
+        estimator.reset(params)
+        estimator._previous = warm  # a step of a running session: warm, not cold
+        estimator.update(jets, measured)
+
+    return _median_us(update, runs)
+
+
+def _calibration_figures(params) -> dict:
+    """Calibrate E0, EL, L and w_d on 40 random noisy poses of a known rod, per model."""
+    from ..estimation.calibration import CalibrationPose, calibrate
+    from ..geometry import so3_exp
+    from ..models import CosseratModel, PrbModel
+    from ..params import with_parameters
+
+    truth = with_parameters(params, {"E0": 2.7e5, "EL": 1.7e5, "L": 0.071, "wd_mz": 2e-4})
+    rng = np.random.default_rng(40)
+    poses = []
+    for _ in range(40):
+        jets = rng.uniform(0.0, 0.12, 3)
+        shape = CosseratModel().solve(jets, truth)
+        noise = so3_exp(rng.normal(0.0, np.radians(0.7) / np.sqrt(3), 3))
+        poses.append(CalibrationPose(jets, shape.tip_sensor_in_base_sensor() @ noise, params.gravity_in_base_m_s2))
+    figures = {}
+    for model in (CosseratModel(), PrbModel()):
+        runs = []
+        for _ in range(3):
+            start = time.perf_counter()
+            result = calibrate(model, poses, params)
+            runs.append(time.perf_counter() - start)
+        seconds = statistics.median(runs)
+        figures[model.name] = {"median_s": round(seconds, 3), "target_s": CALIBRATION_TARGETS_S[model.name],
+                               "met": seconds <= CALIBRATION_TARGETS_S[model.name],
+                               "rms_orientation_deg_after": round(result.rms_orientation_deg_after, 3)}
+    return figures
 
 
 def run(args: argparse.Namespace) -> int:
