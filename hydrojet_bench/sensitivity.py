@@ -27,7 +27,7 @@ import numpy as np
 
 from .effects import EffectParameter
 from .models import kernels
-from .models.shooting import ShootingModel, Solution
+from .models.shooting import PreparedProblem, ShootingModel, Solution
 from .params import (DISTURBANCE_NAMES, PARAMETER_SCALES, ModelParameters, get_parameter,
                      with_parameters)
 
@@ -80,6 +80,15 @@ def tip_twist(nominal: Solution, perturbed: Solution) -> np.ndarray:
     return twist
 
 
+def disturbance_columns(model: ShootingModel, prepared: PreparedProblem, seed: Solution,
+                        components: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """(6, k) sensitivity columns for w_d components (0-2 force in N, 3-5 moment in N m)
+    with the given steps, on an already packed problem. ``seed`` is the nominal solution
+    of ``prepared`` carrying an accurate Jacobian (`ShootingModel.with_accurate_jacobian`)."""
+    unit = np.where(components < 3, prepared.force_scale_n, prepared.moment_scale_nm)
+    return model.tip_wrench_columns(prepared, seed, components, steps / unit) / unit
+
+
 def sensitivity(model: ShootingModel, jet_forces_n: Sequence[float], params: ModelParameters,
                 names: Sequence[str], *, nominal: Solution | None = None, previous: Solution | None = None,
                 relative_step: float = DEFAULT_RELATIVE_STEP, central: bool = False) -> Sensitivity:
@@ -107,8 +116,7 @@ def sensitivity(model: ShootingModel, jet_forces_n: Sequence[float], params: Mod
     batched = [column for column, name in enumerate(names) if name in DISTURBANCE_NAMES and not central]
     if batched:
         components = np.array([DISTURBANCE_NAMES.index(names[c]) for c in batched], dtype=np.int64)
-        unit = np.where(components < 3, prepared.force_scale_n, prepared.moment_scale_nm)
-        columns[:, batched] = model.tip_wrench_columns(prepared, seed, components, steps[batched] / unit) / unit
+        columns[:, batched] = disturbance_columns(model, prepared, seed, components, steps[batched])
     for column, name in enumerate(names):
         if column in batched:
             continue

@@ -133,8 +133,7 @@ def _online_update_us(model, params, runs: int) -> float:
     warm = model.solve(jets, params)
 
     def update() -> None:
-        estimator.reset(params)
-        estimator._previous = warm  # a step of a running session: warm, not cold
+        estimator.reset(params, previous=warm)  # a step of a running session: warm, not cold
         estimator.update(jets, measured)
 
     return _median_us(update, runs)

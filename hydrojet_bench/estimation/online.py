@@ -20,14 +20,16 @@ the largest eigenvalue of S S^T (``damping``), so one default works for any rod.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..geometry import body_rotation_error, matrix_from_quat, quat_from_matrix, rotation_angle_deg
-from ..params import DISTURBANCE_MOMENT_NAMES, DisturbanceWrench, ModelParameters
-from ..sensitivity import sensitivity
+from ..geometry import matrix_from_quat
+from ..models import kernels
+from ..params import DISTURBANCE_MOMENT_NAMES, PARAMETER_SCALES, ModelParameters, with_parameters
+from ..sensitivity import DEFAULT_RELATIVE_STEP, disturbance_columns
 
 if TYPE_CHECKING:
     from ..models.shooting import ShootingModel, Solution
@@ -77,7 +79,9 @@ class OnlineDisturbanceEstimator:
     """Tracks w_d|m from a stream of (jet forces, measured orientation) pairs.
 
     params: the calibrated parameters; their w_d is the starting estimate. Only the
-    moment is updated, as in the paper; the calibrated force stays.
+    moment is updated, as in the paper; the calibrated force stays. The estimate is
+    applied to the packed problem rather than to ``params``, so the model keeps reusing
+    its packing between updates (rebuilding it would cost more than the update).
     """
 
     def __init__(self, model: ShootingModel, params: ModelParameters,
@@ -85,17 +89,25 @@ class OnlineDisturbanceEstimator:
         self.model = model
         self.settings = settings
         self.params = params
+        self._moment = np.array(params.disturbance.moment_nm, dtype=float)
         self._previous: Solution | None = None
 
     @property
     def disturbance_moment_nm(self) -> np.ndarray:
-        return np.array(self.params.disturbance.moment_nm)
+        """The current estimate of w_d|m, tip frame, N m."""
+        return self._moment.copy()
 
-    def reset(self, params: ModelParameters | None = None) -> None:
-        """Forget the path and, if given, restart from ``params``' disturbance."""
+    def current_params(self) -> ModelParameters:
+        """The calibrated parameters with the current moment estimate."""
+        return with_parameters(self.params, dict(zip(DISTURBANCE_MOMENT_NAMES, self._moment)))
+
+    def reset(self, params: ModelParameters | None = None, previous: Solution | None = None) -> None:
+        """Restart: from ``params``' disturbance if given, and from the path state of
+        ``previous`` (the last shape of a session being resumed) or from none."""
         if params is not None:
             self.params = params
-        self._previous = None
+            self._moment = np.array(params.disturbance.moment_nm, dtype=float)
+        self._previous = previous
 
     def update(self, jet_forces_n, measured_tip_in_base_sensor: np.ndarray, *,
                gravity_in_base_m_s2=None, iterations: int | None = None) -> EstimateStep:
@@ -109,37 +121,38 @@ class OnlineDisturbanceEstimator:
         measured = np.asarray(measured_tip_in_base_sensor, dtype=float)
         if measured.shape == (4,):
             measured = matrix_from_quat(measured)
-        if gravity_in_base_m_s2 is not None:
+        if gravity_in_base_m_s2 is not None and tuple(gravity_in_base_m_s2) != self.params.gravity_in_base_m_s2:
             self.params = replace(self.params, gravity_in_base_m_s2=tuple(gravity_in_base_m_s2))
         budget = self.settings.iterations if iterations is None else iterations
-        solution = self._solve(jet_forces_n)
-        error_before = self._error_deg(solution, measured)
-        error = error_before
+        packed = self.model.prepare(jet_forces_n, self.params, self._previous)
+        prepared = packed.with_disturbance_moment(self._moment)
+        solution = self.model.solve_prepared(prepared, self._previous)
+        omega = np.empty(3)
+        error_before = error = self._error_deg(solution, measured, omega)
         done = 0
         while done < budget and error > self.settings.tolerance_deg:
-            # omega_des in the tip sensor's frame; the sensitivity is in the rod tip's frame.
-            omega_sensor = body_rotation_error(solution.tip_sensor_in_base_sensor(), measured)
-            omega_tip = solution.tip_sensor_mounting @ omega_sensor
-            matrix = sensitivity(self.model, jet_forces_n, self.params, DISTURBANCE_MOMENT_NAMES,
-                                 nominal=solution, previous=self._previous).rotation_rows
+            seed = self.model.with_accurate_jacobian(solution, prepared)
+            steps = DEFAULT_RELATIVE_STEP * np.maximum(np.abs(self._moment), _MOMENT_SCALES)
+            matrix = disturbance_columns(self.model, prepared, seed, _MOMENT_COMPONENTS, steps)[3:]
             gram = matrix @ matrix.T
             mu = self.settings.damping * np.linalg.eigvalsh(gram)[-1]
-            step = self.settings.gain * matrix.T @ np.linalg.solve(gram + mu * np.eye(3), omega_tip)
-            self._set_moment(self.disturbance_moment_nm + step)
-            solution = self._solve(jet_forces_n, warm_start=solution)
-            error = self._error_deg(solution, measured)
+            # omega_des is in the tip sensor's frame; the sensitivity in the rod tip's.
+            omega_tip = solution.tip_sensor_mounting @ omega
+            self._moment = self._moment + self.settings.gain * matrix.T @ np.linalg.solve(
+                gram + mu * np.eye(3), omega_tip)
+            prepared = packed.with_disturbance_moment(self._moment)
+            solution = self.model.solve_prepared(prepared, seed)
+            error = self._error_deg(solution, measured, omega)
             done += 1
         self._previous = solution
-        return EstimateStep(error_before, error, done, self.disturbance_moment_nm, solution)
-
-    def _solve(self, jet_forces_n, warm_start: Solution | None = None) -> Solution:
-        return self.model.solve(jet_forces_n, self.params, previous=self._previous,
-                                warm_start=warm_start if warm_start is not None else self._previous)
-
-    def _set_moment(self, moment_nm: np.ndarray) -> None:
-        disturbance = DisturbanceWrench(self.params.disturbance.force_n, tuple(moment_nm))
-        self.params = replace(self.params, disturbance=disturbance)
+        return EstimateStep(error_before, error, done, self._moment.copy(), solution)
 
     @staticmethod
-    def _error_deg(solution: Solution, measured: np.ndarray) -> float:
-        return float(rotation_angle_deg(solution.tip_sensor_quaternion(), quat_from_matrix(measured)))
+    def _error_deg(solution: Solution, measured: np.ndarray, omega: np.ndarray) -> float:
+        """Angle (deg) from predicted to measured; writes the rotation vector (rad, tip
+        sensor frame) into ``omega``."""
+        return math.degrees(kernels.relative_rotation_vector(solution.tip_sensor_in_base_sensor(), measured, omega))
+
+
+_MOMENT_COMPONENTS = np.array([3, 4, 5], dtype=np.int64)
+_MOMENT_SCALES = np.array([PARAMETER_SCALES[name] for name in DISTURBANCE_MOMENT_NAMES])

@@ -575,30 +575,41 @@ def jacobian_at(kind, resolution, reference, profile, tip, base, beta, jacobian)
 
 
 @njit(cache=True)
-def body_twist(rotation_a, position_a, rotation_b, position_b, out):
-    """Twist (v, omega) in frame a with exp(twist) = g_a^-1 g_b: se(3) logarithm of the
-    relative pose, for poses given as rotation matrices and positions."""
+def relative_rotation_vector(rotation_a, rotation_b, out):
+    """Rotation vector (rad, in frame a) of R_a^T R_b, through its quaternion so it is
+    accurate for small and large angles alike; returns the angle."""
     rel = np.empty((3, 3))
     for i in range(3):
         for j in range(3):
             rel[i, j] = rotation_a[0, i] * rotation_b[0, j] + rotation_a[1, i] * rotation_b[1, j] + rotation_a[2, i] * rotation_b[2, j]
-    dp0 = position_b[0] - position_a[0]
-    dp1 = position_b[1] - position_a[1]
-    dp2 = position_b[2] - position_a[2]
-    t0 = rotation_a[0, 0] * dp0 + rotation_a[1, 0] * dp1 + rotation_a[2, 0] * dp2
-    t1 = rotation_a[0, 1] * dp0 + rotation_a[1, 1] * dp1 + rotation_a[2, 1] * dp2
-    t2 = rotation_a[0, 2] * dp0 + rotation_a[1, 2] * dp1 + rotation_a[2, 2] * dp2
-    # Rotation vector through the quaternion (accurate for small and large angles).
     w = 0.5 * np.sqrt(max(1.0 + rel[0, 0] + rel[1, 1] + rel[2, 2], 0.0))
     if w < 1e-6:
-        raise ValueError("body_twist: relative rotation too close to a half turn")
+        raise ValueError("relative_rotation_vector: relative rotation too close to a half turn")
     vx = (rel[2, 1] - rel[1, 2]) / (4.0 * w)
     vy = (rel[0, 2] - rel[2, 0]) / (4.0 * w)
     vz = (rel[1, 0] - rel[0, 1]) / (4.0 * w)
     sine = np.sqrt(vx * vx + vy * vy + vz * vz)
     theta = 2.0 * np.arctan2(sine, w)
     scale = 2.0 / w if sine < 1e-12 else theta / sine
-    ox, oy, oz = scale * vx, scale * vy, scale * vz
+    out[0] = scale * vx
+    out[1] = scale * vy
+    out[2] = scale * vz
+    return theta
+
+
+@njit(cache=True)
+def body_twist(rotation_a, position_a, rotation_b, position_b, out):
+    """Twist (v, omega) in frame a with exp(twist) = g_a^-1 g_b: se(3) logarithm of the
+    relative pose, for poses given as rotation matrices and positions."""
+    omega = np.empty(3)
+    theta = relative_rotation_vector(rotation_a, rotation_b, omega)
+    ox, oy, oz = omega[0], omega[1], omega[2]
+    dp0 = position_b[0] - position_a[0]
+    dp1 = position_b[1] - position_a[1]
+    dp2 = position_b[2] - position_a[2]
+    t0 = rotation_a[0, 0] * dp0 + rotation_a[1, 0] * dp1 + rotation_a[2, 0] * dp2
+    t1 = rotation_a[0, 1] * dp0 + rotation_a[1, 1] * dp1 + rotation_a[2, 1] * dp2
+    t2 = rotation_a[0, 2] * dp0 + rotation_a[1, 2] * dp1 + rotation_a[2, 2] * dp2
     # v = J_l(omega)^-1 t, with J_l^-1 = I - hat(w)/2 + c hat(w)^2.
     if theta < 1e-6:
         c = 1.0 / 12.0

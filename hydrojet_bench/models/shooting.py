@@ -127,6 +127,14 @@ class PreparedProblem:
         tip[kernels.TIP_JETS:kernels.TIP_JETS + 3] = jet_forces_n
         return self._replace_tip(tip)
 
+    def with_disturbance_moment(self, moment_nm: np.ndarray) -> "PreparedProblem":
+        """Same problem with w_d's moment (tip frame, N m) replaced; follower moments that
+        effects add are kept (only the change from the parameters' w_d is applied)."""
+        tip = self.tip.copy()
+        change = np.asarray(moment_nm, dtype=float) - self.problem.params.disturbance.moment_nm
+        tip[kernels.TIP_FOLLOWER_MOMENT:kernels.TIP_FOLLOWER_MOMENT + 3] += change / self.moment_scale_nm
+        return self._replace_tip(tip)
+
     def with_disturbance_offset(self, component: int, offset: float) -> "PreparedProblem":
         """Same problem with w_d component ``component`` (0-2 force in N, 3-5 moment in
         N m, tip frame, the order of `DISTURBANCE_NAMES`) increased by ``offset``."""
