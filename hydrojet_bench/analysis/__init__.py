@@ -1,0 +1,1 @@
+"""Analysis: error metrics and breakdowns comparing model predictions with measurements."""
