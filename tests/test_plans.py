@@ -1,0 +1,130 @@
+"""Measurement plans: the paper's calibration poses and validation sweeps."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hydrojet_bench.params import actuation_matrix
+from hydrojet_bench.plans import (CALIBRATION_SWEEP, DEFAULT_MAX_FORCE_N, Plan, PlanStep, _resultant_to_jets,
+                                  calibration_plan, paper_protocol, validation_sweeps)
+
+
+def test_calibration_plan_is_forty_labelled_poses_within_the_force_limits():
+    plan = calibration_plan(max_force_n=0.08, seed=3)
+    forces = plan.jet_forces_n
+    assert len(plan) == 40
+    assert np.all(plan.sweeps == CALIBRATION_SWEEP)
+    assert plan.step_indices.tolist() == list(range(40))
+    assert np.all(forces >= 0.0) and np.all(forces <= 0.08)
+    # The flanking-pair split leaves at least one jet off in every pose.
+    assert np.all(np.sum(forces > 0.0, axis=1) <= 2)
+    assert all(step.settle_s == 5.0 for step in plan)
+
+
+def test_calibration_poses_cover_every_bending_direction_and_reach_the_edge():
+    forces = calibration_plan(seed=0).jet_forces_n
+    resultant = (actuation_matrix(0.0) @ forces.T).T[:, :2]
+    angle_deg = np.degrees(np.arctan2(resultant[:, 1], resultant[:, 0])) % 360.0
+    sectors = np.unique((angle_deg // 60.0).astype(int))
+    assert sectors.tolist() == [0, 1, 2, 3, 4, 5]
+    # Some pose puts a jet near its limit (area-uniform radius: P(all < 0.8) ~ 0.64^40).
+    assert forces.max() > 0.8 * DEFAULT_MAX_FORCE_N
+    # ...and the radii spread over the workspace rather than sitting at the edge.
+    largest_jet = forces.max(axis=1) / DEFAULT_MAX_FORCE_N
+    assert largest_jet.min() < 0.4 and np.median(largest_jet) < 0.9
+
+
+@pytest.mark.parametrize("angle_deg", [0.0, 17.0, 30.0, 60.0, 90.0, 149.0, 150.0, 210.0, 269.0, 330.0, 359.9])
+def test_resultant_split_is_exact_and_non_negative(angle_deg):
+    resultant = 0.05 * np.array([math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))])
+    jets = _resultant_to_jets(resultant)
+    assert np.all(jets >= 0.0)
+    np.testing.assert_allclose(actuation_matrix(0.0)[:2] @ jets, resultant, atol=1e-15)
+
+
+def test_calibration_plan_is_deterministic_per_seed():
+    assert calibration_plan(seed=7) == calibration_plan(seed=7)
+    assert not np.array_equal(calibration_plan(seed=7).jet_forces_n, calibration_plan(seed=8).jet_forces_n)
+
+
+def test_validation_sweeps_ramp_one_jet_up_and_back_down():
+    plan = validation_sweeps(max_force_n=0.09)
+    assert len(plan) == 9 * 21
+    assert sorted(set(plan.sweeps.tolist())) == list(range(9))
+    up = np.linspace(0.0, 0.09, 11)
+    for sweep in range(9):
+        rows = plan.sweeps == sweep
+        forces = plan.jet_forces_n[rows]
+        assert plan.step_indices[rows].tolist() == list(range(21))
+        jet = sweep % 3
+        others = [j for j in range(3) if j != jet]
+        assert np.all(forces[:, others] == 0.0)
+        ramp = forces[:, jet]
+        np.testing.assert_allclose(ramp[:11], up, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(ramp[10:], up[::-1], rtol=0, atol=1e-15)
+        assert np.all(np.diff(ramp[:11]) > 0) and np.all(np.diff(ramp[10:]) < 0)
+        assert ramp[0] == ramp[-1] == 0.0 and ramp[10] == 0.09
+    # Repetition by repetition: jets 1, 2, 3, then again.
+    first_active = [int(np.argmax(plan.jet_forces_n[plan.sweeps == s].max(axis=0))) for s in range(9)]
+    assert first_active == [0, 1, 2] * 3
+
+
+def test_sweep_shape_follows_steps_and_repetitions():
+    plan = validation_sweeps(0.05, steps_up=4, repetitions=2, settle_s=2.5)
+    assert len(plan) == 3 * 2 * 9
+    assert plan.sweeps.max() == 5
+    assert plan.duration_s == pytest.approx(54 * 2.5)
+
+
+def test_paper_protocol_is_calibration_then_nine_sweeps():
+    plan = paper_protocol()
+    assert len(plan) == 229
+    assert np.all(plan.sweeps[:40] == -1) and np.all(plan.sweeps[40:] >= 0)
+    assert plan.duration_s == pytest.approx(229 * 5.0)
+    assert plan == calibration_plan() + validation_sweeps()
+
+
+@pytest.mark.parametrize("call, argument", [
+    (lambda: calibration_plan(count=0), "count"),
+    (lambda: calibration_plan(count=2.5), "count"),
+    (lambda: calibration_plan(max_force_n=0.0), "max_force_n"),
+    (lambda: calibration_plan(max_force_n=float("nan")), "max_force_n"),
+    (lambda: calibration_plan(max_force_n="big"), "max_force_n"),
+    (lambda: calibration_plan(seed=-1), "seed"),
+    (lambda: calibration_plan(settle_s=0.0), "settle_s"),
+    (lambda: validation_sweeps(max_force_n=-0.1), "max_force_n"),
+    (lambda: validation_sweeps(steps_up=0), "steps_up"),
+    (lambda: validation_sweeps(repetitions=0), "repetitions"),
+    (lambda: validation_sweeps(settle_s=float("inf")), "settle_s"),
+    (lambda: paper_protocol(max_force_n=0), "max_force_n"),
+])
+def test_bad_builder_arguments_are_named(call, argument):
+    with pytest.raises(ValueError, match=argument):
+        call()
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"jet_forces_n": (0.1, -0.01, 0.0)}, r"jet_forces_n\[q2\] must be finite and >= 0"),
+    ({"jet_forces_n": (0.1, 0.0)}, "must have 3 forces"),
+    ({"jet_forces_n": (0.1, float("nan"), 0.0)}, r"jet_forces_n\[q2\]"),
+    ({"sweep": -2}, "sweep must be an integer >= -1"),
+    ({"sweep": True}, "sweep must be an integer"),
+    ({"step": -1}, "step must be an integer >= 0"),
+    ({"settle_s": 0.0}, "settle_s"),
+])
+def test_bad_plan_steps_name_their_field(kwargs, message):
+    values = {"jet_forces_n": (0.0, 0.0, 0.0), "sweep": 0, "step": 0, "settle_s": 5.0} | kwargs
+    with pytest.raises(ValueError, match=message):
+        PlanStep(**values)
+
+
+def test_plan_holds_only_steps_and_steps_are_frozen():
+    with pytest.raises(ValueError, match=r"Plan\.steps\[1\] must be a PlanStep"):
+        Plan((PlanStep((0.0, 0.0, 0.0), 0, 0), (0.0, 0.0, 0.0)))
+    step = PlanStep([0.01, 0, 0], 0, 0)
+    assert step.jet_forces_n == (0.01, 0.0, 0.0)
+    with pytest.raises(AttributeError):
+        step.sweep = 3  # type: ignore[misc]
