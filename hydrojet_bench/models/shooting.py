@@ -23,7 +23,7 @@ import numpy as np
 
 from ..effects import Effect, effect_values, load_effect
 from ..errors import ConvergenceError
-from ..geometry import quat_from_matrix, se3
+from ..geometry import quat_from_matrix, se3, so3_exp
 from ..params import ModelParameters
 from . import kernels
 from .problem import RodProblem
@@ -331,15 +331,22 @@ class ShootingModel:
         clamp = work.clamp_state
         base_wrench = clamp[12:18] * prepared.wrench_scale
         clamp_rotation = _NO_ROTATION
+        rotations = work.nodes_r
+        # Node 0 is the clamp frame by the boundary condition; report it exactly rather than
+        # the integrated frame, which matches it only to the solver tolerance plus RK4's
+        # drift off SO(3) (~1e-7 rad), so every user of the base frame agrees.
         if prepared.base[kernels.BASE_COMPLIANCE:kernels.BASE_COMPLIANCE + 3].any():
             clamp_rotation = np.array(kernels.clamp_rotation_vector(clamp[15:18], prepared.base))
+            rotations[0] = so3_exp(clamp_rotation)
+        else:
+            rotations[0] = np.eye(3)
         # The shot starts with the tip at the origin; put the clamp there instead.
         positions = work.nodes_p
         positions -= clamp[:3]
         positions *= prepared.length_m
         return Solution(
             self.name, prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].copy(), prepared.node_arc_length_m,
-            positions, work.nodes_r, base_wrench, clamp_rotation, problem.base_sensor_mounting,
+            positions, rotations, base_wrench, clamp_rotation, problem.base_sensor_mounting,
             problem.tip_sensor_mounting, int(work.info[1]), float(work.info[2]), jacobian,
         )
 
