@@ -1,0 +1,307 @@
+"""Measurement tables in CSV: the stable contract, its reader and its writer.
+
+The CSV contract (stable: change it only by adding optional columns)
+--------------------------------------------------------------------
+* UTF-8 text (a byte-order mark is allowed), comma-separated, one sample per line.
+* Lines starting with ``#`` are comments and are allowed only before the header; blank
+  lines are ignored anywhere.
+* A header row is required. Column order is free. Names are matched exactly (case
+  sensitive), after stripping surrounding spaces.
+* Required columns:
+
+  ========================================  =====================================
+  ``t``                                     time, s; must not go backwards
+  ``q1``, ``q2``, ``q3``                    commanded jet forces, N, >= 0
+  ``base_qw, base_qx, base_qy, base_qz``    base sensor orientation, tracker frame
+  ``tip_qw, tip_qx, tip_qy, tip_qz``        tip sensor orientation, tracker frame
+  ========================================  =====================================
+
+  Orientations are unit quaternions, scalar first, mapping sensor-frame vectors into
+  the tracker frame; they must be within 1e-3 of unit norm.
+* Optional columns:
+
+  ===============================  ===================================================
+  ``base_x, base_y, base_z``       base sensor position, tracker frame, m (all three)
+  ``tip_x, tip_y, tip_z``          tip sensor position, tracker frame, m (all three)
+  ``sweep``                        integer; -1 for calibration or unlabelled rows
+                                   (the default when the column is absent)
+  ``step``                         integer quasistatic step; when absent, a new step
+                                   starts whenever ``sweep`` or any jet force changes
+  ===============================  ===================================================
+
+* Any other column is an error (it would otherwise be silently ignored).
+* Every listed cell of every row must hold a finite number (integers for ``sweep`` and
+  ``step``, where ``3.0`` counts as 3): nothing is filled in and nothing is dropped.
+* Everything else about the rig (gravity, sensor mountings, rod, jets) comes from the
+  rig profile given with the table (`hydrojet_bench.profile`).
+
+Every problem raises `UserError` naming the file, the line (1-based, counting every
+line of the file) and the column, e.g.
+``run.csv, line 12, column tip_qx: 'abc' is not a number``.
+
+On reading, a row whose jet force exceeds the profile's ``jets.max_force_n`` gets the
+`SampleFlag.SATURATED` flag (it is kept). `write_csv` writes the same contract, with
+every column in a fixed order and floats at full precision, so write -> read gives the
+same dataset back.
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import UserError
+from ..profile import RigProfile
+from .dataset import QUATERNION_NORM_TOLERANCE, Dataset, SampleFlag, saturation_flags, steps_from_runs
+
+REQUIRED_COLUMNS: tuple[str, ...] = (
+    "t", "q1", "q2", "q3",
+    "base_qw", "base_qx", "base_qy", "base_qz",
+    "tip_qw", "tip_qx", "tip_qy", "tip_qz",
+)
+POSITION_COLUMNS: dict[str, tuple[str, str, str]] = {
+    "base": ("base_x", "base_y", "base_z"),
+    "tip": ("tip_x", "tip_y", "tip_z"),
+}
+LABEL_COLUMNS: tuple[str, ...] = ("sweep", "step")
+OPTIONAL_COLUMNS: tuple[str, ...] = POSITION_COLUMNS["base"] + POSITION_COLUMNS["tip"] + LABEL_COLUMNS
+KNOWN_COLUMNS: tuple[str, ...] = REQUIRED_COLUMNS + OPTIONAL_COLUMNS
+_QUATERNIONS = {"base": REQUIRED_COLUMNS[4:8], "tip": REQUIRED_COLUMNS[8:12]}
+
+# Flags the contract can carry: SATURATED is recomputed from the profile on reading.
+_DERIVED_FLAGS = int(SampleFlag.SATURATED)
+
+
+class _Problem:
+    """The earliest problem found so far: (row index, column order) decides."""
+
+    def __init__(self) -> None:
+        self.key: tuple[int, int] | None = None
+        self.message = ""
+
+    def offer(self, row: int, column_order: int, message: str) -> None:
+        if self.key is None or (row, column_order) < self.key:
+            self.key, self.message = (row, column_order), message
+
+
+def _is_comment(line: str) -> bool:
+    return "#" in line and line.lstrip().startswith("#")
+
+
+def _parse_header(fields: list[str], where: str) -> list[str]:
+    names = [name.strip() for name in fields]
+    seen: set[str] = set()
+    for number, name in enumerate(names, start=1):
+        if not name:
+            raise UserError(f"{where}, column {number}: header cell is empty; every column needs a name")
+        if name in seen:
+            raise UserError(f"{where}, column {name}: appears twice in the header")
+        seen.add(name)
+        if name not in KNOWN_COLUMNS:
+            raise UserError(f"{where}, column {name}: unknown column; the contract allows "
+                            f"{', '.join(KNOWN_COLUMNS)} (see hydrojet_bench/data/csv_io.py)")
+    missing = [name for name in REQUIRED_COLUMNS if name not in seen]
+    if missing:
+        raise UserError(f"{where}, column {missing[0]}: required column missing from the header "
+                        f"(missing: {', '.join(missing)})")
+    for triplet in POSITION_COLUMNS.values():
+        present = [name for name in triplet if name in seen]
+        if present and len(present) != 3:
+            absent = [name for name in triplet if name not in seen]
+            raise UserError(f"{where}, column {absent[0]}: missing; position columns come in complete "
+                            f"triplets ({', '.join(triplet)}), the header has only {', '.join(present)}")
+    return names
+
+
+def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
+    """Read a measurement table following the contract above (see the module docstring)."""
+    path = Path(path)
+    name = str(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as error:
+        raise UserError(f"{name}: not UTF-8 text (byte {error.start}): is it really a CSV file?") from None
+    except OSError as error:
+        raise UserError(f"{name}: cannot read: {error.strerror or error}") from None
+    # read_text has already turned \r\n and \r into \n; splitting on \n alone (not
+    # splitlines, which also breaks at form feeds and the like) keeps editors' line numbers.
+    lines = text.split("\n")
+
+    header_index = next((i for i, line in enumerate(lines) if line.strip() and not _is_comment(line)), None)
+    if header_index is None:
+        raise UserError(f"{name}: no header row; expected a line naming the columns "
+                        f"({', '.join(REQUIRED_COLUMNS)}, ...)")
+    header_line = header_index + 1
+    columns = _parse_header(next(csv.reader([lines[header_index]])), f"{name}, line {header_line}")
+    width = len(columns)
+
+    cells: list[list[str]] = []
+    line_numbers: list[int] = []
+    for offset, line in enumerate(lines[header_index + 1:]):
+        number = header_line + 1 + offset
+        if not line.strip():
+            continue
+        if _is_comment(line):
+            raise UserError(f"{name}, line {number}: comment lines (#) are only allowed before the header row")
+        # Plain numbers need no CSV quoting rules; a quoted cell takes the csv module.
+        fields = line.split(",") if '"' not in line else next(csv.reader([line]))
+        if len(fields) < width:
+            raise UserError(f"{name}, line {number}, column {columns[len(fields)]}: missing (the row has "
+                            f"{len(fields)} fields, the header {width} columns)")
+        if len(fields) > width:
+            raise UserError(f"{name}, line {number}, column {width + 1}: the row has {len(fields)} fields "
+                            f"but the header names only {width} columns")
+        cells.append(fields)
+        line_numbers.append(number)
+    if not cells:
+        raise UserError(f"{name}: the header (line {header_line}) is followed by no data rows")
+
+    by_column = dict(zip(columns, zip(*cells)))
+    order = {column: i for i, column in enumerate(columns)}
+
+    def where(row: int, column: str) -> str:
+        return f"{name}, line {line_numbers[row]}, column {column}"
+
+    problem = _Problem()
+    values: dict[str, np.ndarray] = {}
+    for column in columns:
+        array = _parse_numbers(by_column[column], column, problem, order[column], where,
+                               integer=column in LABEL_COLUMNS)
+        if array is not None:
+            values[column] = array
+    if problem.key is not None:
+        raise UserError(problem.message)
+
+    # Checks on whole rows, again reporting the earliest.
+    forces = np.column_stack([values["q1"], values["q2"], values["q3"]])
+    for j, column in enumerate(("q1", "q2", "q3")):
+        negative = np.flatnonzero(forces[:, j] < 0.0)
+        if len(negative):
+            i = int(negative[0])
+            problem.offer(i, order[column], f"{where(i, column)}: jet force must be >= 0 N (a jet cannot "
+                                            f"pull), got {by_column[column][i].strip()}")
+    orientations = {}
+    for sensor, quaternion_columns in _QUATERNIONS.items():
+        q = np.column_stack([values[c] for c in quaternion_columns])
+        norm = np.linalg.norm(q, axis=1)
+        bad = np.flatnonzero(np.abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE)
+        if len(bad):
+            i = int(bad[0])
+            first = min(order[c] for c in quaternion_columns)
+            problem.offer(i, first, f"{where(i, ','.join(quaternion_columns))}: not a unit quaternion "
+                                    f"(norm {norm[i]:.6g}; expected within {QUATERNION_NORM_TOLERANCE:g} of 1)")
+        orientations[sensor] = q
+    time = values["t"]
+    backwards = np.flatnonzero(np.diff(time) < 0.0)
+    if len(backwards):
+        i = int(backwards[0]) + 1
+        problem.offer(i, order["t"], f"{where(i, 't')}: time goes backwards ({by_column['t'][i].strip()} s "
+                                     f"after {by_column['t'][i - 1].strip()} s on line {line_numbers[i - 1]})")
+    if "sweep" in values:
+        low = np.flatnonzero(values["sweep"] < -1)
+        if len(low):
+            i = int(low[0])
+            problem.offer(i, order["sweep"], f"{where(i, 'sweep')}: must be >= 0, or -1 for calibration or "
+                                             f"unlabelled rows, got {by_column['sweep'][i].strip()}")
+    if problem.key is not None:
+        raise UserError(problem.message)
+
+    rows = len(cells)
+    sweep = values.get("sweep", np.full(rows, -1, dtype=np.int64))
+    step = values["step"] if "step" in values else steps_from_runs(sweep, forces)
+    positions = {sensor: (np.column_stack([values[c] for c in triplet]) if triplet[0] in values else None)
+                 for sensor, triplet in POSITION_COLUMNS.items()}
+    try:
+        return Dataset(
+            time_s=time, jet_forces_n=forces,
+            base_orientation=orientations["base"], tip_orientation=orientations["tip"],
+            base_position_m=positions["base"], tip_position_m=positions["tip"],
+            sweep=sweep, step=step, flags=saturation_flags(forces, profile),
+            profile=profile, source=name,
+        )
+    except ValueError as error:  # the checks above should leave nothing for Dataset to find
+        raise UserError(f"{name}: {error}") from None
+
+
+def _parse_numbers(strings: tuple[str, ...], column: str, problem: _Problem, column_order: int,
+                   where: Callable[[int, str], str], *, integer: bool) -> np.ndarray | None:
+    """One column's cells as numbers; problems go to ``problem`` (None returned)."""
+    try:
+        array = np.array(strings, dtype=float)  # fast path; same grammar as float()
+    except ValueError:
+        array = None
+    if array is None:
+        for i, text in enumerate(strings):
+            cell = text.strip()
+            if not cell:
+                problem.offer(i, column_order, f"{where(i, column)}: missing value{_triplet_hint(column)}")
+                return None
+            try:
+                float(cell)
+            except ValueError:
+                problem.offer(i, column_order, f"{where(i, column)}: {cell!r} is not a number")
+                return None
+        raise AssertionError("numpy rejected a column that float() accepts")  # pragma: no cover
+    bad = np.flatnonzero(~np.isfinite(array))
+    if len(bad):
+        i = int(bad[0])
+        problem.offer(i, column_order, f"{where(i, column)}: must be a finite number, got {strings[i].strip()}")
+        return None
+    if integer:
+        fractional = np.flatnonzero(array != np.round(array))
+        if len(fractional):
+            i = int(fractional[0])
+            problem.offer(i, column_order, f"{where(i, column)}: {strings[i].strip()!r} is not an integer")
+            return None
+        return array.astype(np.int64)
+    return array
+
+
+def _triplet_hint(column: str) -> str:
+    for triplet in POSITION_COLUMNS.values():
+        if column in triplet:
+            return f" (position triplets {', '.join(triplet)} must be complete in every row)"
+    return ""
+
+
+def write_csv(dataset: Dataset, path: str | Path, *, drop_flagged: bool = False) -> int:
+    """Write ``dataset`` as a CSV following the contract; returns the number of rows.
+
+    The contract has no flags column: SATURATED is recomputed from the profile when the
+    file is read, but other flags (missing sensors, out of volume) cannot be stored.
+    Rows carrying them raise ValueError unless ``drop_flagged`` is True, in which case
+    they are left out. The profile is not written: read the file back with the same
+    ``--profile``.
+    """
+    keep = (dataset.flags & ~_DERIVED_FLAGS) == 0
+    if not np.all(keep):
+        if not drop_flagged:
+            counts = {flag: count for flag, count in dataset.flag_counts().items()
+                      if count and flag != SampleFlag.SATURATED.name}
+            raise ValueError(f"{int(np.sum(~keep))} rows carry flags the CSV contract cannot hold "
+                             f"({', '.join(f'{k}: {v}' for k, v in counts.items())}); pass "
+                             "drop_flagged=True to leave them out")
+        dataset = dataset.select(keep)
+    columns: list[str] = list(REQUIRED_COLUMNS)
+    blocks: list[np.ndarray] = [dataset.time_s[:, None], dataset.jet_forces_n,
+                                dataset.base_orientation, dataset.tip_orientation]
+    for sensor, triplet in POSITION_COLUMNS.items():
+        positions = getattr(dataset, f"{sensor}_position_m")
+        if positions is not None:
+            columns.extend(triplet)
+            blocks.append(positions)
+    floats = np.hstack(blocks) if len(dataset) else np.zeros((0, len(columns)))
+    source = " ".join(dataset.source.split())
+    profile_name = dataset.profile.name + (f" ({dataset.profile.path})" if dataset.profile.path else "")
+    with Path(path).open("w", encoding="utf-8", newline="") as handle:
+        handle.write("# HydroJet Bench measurement table (contract: hydrojet_bench/data/csv_io.py)\n")
+        handle.write(f"# source: {source}\n# rig profile: {' '.join(profile_name.split())}\n")
+        handle.write(",".join(columns + list(LABEL_COLUMNS)) + "\n")
+        # repr gives the shortest string that reads back to the same float.
+        handle.writelines(",".join(map(repr, values)) + f",{sweep},{step}\n"
+                          for values, sweep, step in zip(floats.tolist(), dataset.sweep.tolist(),
+                                                         dataset.step.tolist()))
+    return len(dataset)
