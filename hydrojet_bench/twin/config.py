@@ -1,0 +1,298 @@
+"""What a digital twin is made of: true physics, hidden effects, rig geometry, sensor noise.
+
+Everything is a frozen dataclass that validates itself; a bad value raises `ValueError`
+naming the field (``TwinConfig.settle_time_constant_s must be ...``).
+
+Frames (see also `hydrojet_bench.params` and `drivers.plant`):
+
+* *world*: the EM tracker's frame, in which the twin reports sensor poses;
+* *base frame*: the clamp's frame, z along the undeformed rod towards the tip; its pose
+  in the world is ``base_orientation_in_world`` / ``base_position_in_world_m``;
+* body frames at the clamp (s = 0) and the tip (s = L), as the models return them.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..effects import Effect, load_effect
+from ..geometry import quat_normalize
+from ..params import ModelParameters
+from ..profile import RigProfile, SensorMounting
+
+JET_COUNT = 3
+DUTY_MAX_PERMILLE = 1000
+# NDI Aurora accuracy quoted by the paper (sec. V): 0.48 mm and 0.70 deg RMS.
+EM_POSITION_RMS_M = 0.48e-3
+EM_ORIENTATION_RMS_DEG = 0.70
+# The default rig hangs the rod from its clamp with the tracker's z axis up: the base
+# frame's z (towards the tip) is the world's -z, a half turn about x.
+HANGING_BASE_ORIENTATION = (0.0, 1.0, 0.0, 0.0)
+# A plausible mid-latitude Earth field (uT), the same default as `drivers.plant.StaticPlant`.
+DEFAULT_MAGNETIC_FIELD_UT = (20.0, 0.0, -45.0)
+
+
+def _number(owner: str, name: str, value: object) -> float:
+    if not isinstance(value, (int, float, np.integer, np.floating)) or isinstance(value, bool):
+        raise ValueError(f"{owner}.{name} must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise ValueError(f"{owner}.{name} must be finite, got {value!r}")
+    return float(value)
+
+
+def _non_negative(owner: str, name: str, value: object) -> float:
+    number = _number(owner, name, value)
+    if number < 0:
+        raise ValueError(f"{owner}.{name} must be >= 0, got {value!r}")
+    return number
+
+
+def _vector(owner: str, name: str, value: object, size: int) -> tuple[float, ...]:
+    try:
+        items = tuple(value)  # type: ignore[arg-type]
+    except TypeError:
+        raise ValueError(f"{owner}.{name} must be {size} numbers, got {value!r}") from None
+    if len(items) != size:
+        raise ValueError(f"{owner}.{name} must have {size} components, got {len(items)}")
+    return tuple(_number(owner, f"{name}[{i}]", v) for i, v in enumerate(items))
+
+
+def _unit_quaternion(owner: str, name: str, value: object) -> tuple[float, float, float, float]:
+    q = np.array(_vector(owner, name, value, 4))
+    norm = float(np.linalg.norm(q))
+    # A typed-in quaternion is rarely normalised to more than 4 digits; anything further
+    # off is a mistake (a vector given where a quaternion was meant, a missing sign).
+    if abs(norm - 1.0) > 1e-3:
+        raise ValueError(f"{owner}.{name} must be a unit quaternion (w, x, y, z), got norm {norm:.6g}")
+    return tuple(float(v) for v in quat_normalize(q))  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class JetResponse:
+    """Steady jet force (N) produced by a valve duty (per mille): a monotone table,
+    interpolated linearly; above its last duty the force stays at its last value, below
+    its first duty the jet is off (0 N: a valve opened less than any calibrated duty is
+    in its dead band, and a closed valve never pushes).
+
+    duty_permille: strictly increasing integers in 0..1000.
+    force_n: force at each duty, finite, >= 0, non-decreasing (a jet never pushes less
+        when its valve opens further).
+    """
+
+    duty_permille: tuple[int, ...]
+    force_n: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        duties = tuple(self.duty_permille)
+        for d in duties:
+            if isinstance(d, bool) or not isinstance(d, (int, np.integer)) or not 0 <= d <= DUTY_MAX_PERMILLE:
+                raise ValueError(f"JetResponse.duty_permille must be integers in 0..{DUTY_MAX_PERMILLE}, "
+                                 f"got {self.duty_permille!r}")
+        forces = _vector("JetResponse", "force_n", self.force_n, len(self.force_n))
+        if len(duties) < 2:
+            raise ValueError(f"JetResponse.duty_permille needs at least 2 points, got {len(duties)}")
+        if len(forces) != len(duties):
+            raise ValueError(f"JetResponse.force_n has {len(forces)} points, duty_permille has {len(duties)}")
+        if any(b <= a for a, b in zip(duties, duties[1:])):
+            raise ValueError(f"JetResponse.duty_permille must be strictly increasing, got {duties}")
+        if any(f < 0.0 for f in forces):
+            raise ValueError(f"JetResponse.force_n must be >= 0 N (jets only push), got {forces}")
+        if any(b < a for a, b in zip(forces, forces[1:])):
+            raise ValueError(f"JetResponse.force_n must be non-decreasing, got {forces}")
+        object.__setattr__(self, "duty_permille", tuple(int(d) for d in duties))
+        object.__setattr__(self, "force_n", forces)
+
+    @classmethod
+    def linear(cls, max_force_n: float) -> "JetResponse":
+        """0 per mille -> 0 N up to 1000 per mille -> ``max_force_n``."""
+        return cls((0, DUTY_MAX_PERMILLE), (0.0, _non_negative("JetResponse", "max_force_n", max_force_n)))
+
+    @classmethod
+    def from_calibration(cls, calibration: object) -> "JetResponse":
+        """The inverse of a valve client's `drivers.valve.calibration.JetCalibration`
+        (force -> duty), so that a force the client commands comes back out of the twin.
+        Needs the calibration's duties strictly increasing."""
+        return cls(tuple(calibration.duty_permille), tuple(calibration.force_n))  # type: ignore[attr-defined]
+
+    def force_for_duty(self, duty_permille: float) -> float:
+        """Jet force (N) at a valve duty (per mille)."""
+        if duty_permille < self.duty_permille[0]:
+            return 0.0
+        return float(np.interp(duty_permille, self.duty_permille, self.force_n))
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """Sensor noise of the twin. Totals are RMS over all three axes: each axis gets
+    total / sqrt(3), so the norm of a position error or the angle of an orientation error
+    has the stated RMS.
+
+    em_position_rms_m, em_orientation_rms_deg: EM tracker (NDI Aurora) accuracy, white,
+        per sample; the orientation error is a body-frame rotation of the sensor.
+    imu_orientation_rms_deg: white orientation noise of an IMU-fused orientation.
+    imu_drift_deg_per_sqrt_s: random-walk drift of each IMU's reference frame (world
+        side): after t seconds the drift angle has RMS ``imu_drift * sqrt(t)``. The IMU
+        defaults are illustrative (a fused ICM-20948 with a magnetometer stays within a
+        few tenths of a degree over the ~20 min protocol), not datasheet figures.
+    """
+
+    em_position_rms_m: float = EM_POSITION_RMS_M
+    em_orientation_rms_deg: float = EM_ORIENTATION_RMS_DEG
+    imu_orientation_rms_deg: float = 0.3
+    imu_drift_deg_per_sqrt_s: float = 0.02
+
+    def __post_init__(self) -> None:
+        for name in ("em_position_rms_m", "em_orientation_rms_deg", "imu_orientation_rms_deg",
+                     "imu_drift_deg_per_sqrt_s"):
+            object.__setattr__(self, name, _non_negative("SensorNoise", name, getattr(self, name)))
+
+    @classmethod
+    def off(cls) -> "SensorNoise":
+        """Perfect sensors: measurements equal the truth."""
+        return cls(0.0, 0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class TwinConfig:
+    """A simulated HydroJet rig.
+
+    true_params: the rod's true parameters (the values a calibration should recover).
+        Its ``gravity_in_base_m_s2`` is the truth unless ``gravity_in_world_m_s2`` is given.
+    hidden_effects: effects (instances, library names or ``file.py:Class``) the twin's
+        physics includes on top of gravity, which a model under evaluation may lack.
+        Gravity is always part of the twin (listing it here is allowed, not needed).
+    hidden_effect_values: ``"effect.parameter" -> value`` for the hidden effects (and
+        gravity's ``weight_scale``), merged into ``true_params``; unlisted parameters take
+        the effect's default.
+    noise: `SensorNoise`; `SensorNoise.off()` for exact measurements.
+    seed: seeds the twin's own random generator (noise only; the physics is exact).
+    base_orientation_in_world, base_position_in_world_m: the clamp's pose in the tracker
+        frame (unit quaternion base -> world; m). Default: hanging, tracker z up.
+    gravity_in_world_m_s2: when given, the truth's gravity, mapped into the base frame
+        (replacing ``true_params.gravity_in_base_m_s2``); else gravity in the world
+        follows from the params and the base pose.
+    magnetic_field_in_world_ut: Earth's field for simulated magnetometers, uT.
+    base_sensor, tip_sensor: `hydrojet_bench.profile.SensorMounting`s on the clamp and on
+        the rod tip (default: at the body frame's origin with its axes).
+    settle_time_constant_s: first-order settling towards a new equilibrium, s (0 jumps).
+    max_force_n: full-scale jet force of the default linear valve response, N.
+    jet_response: one `JetResponse` per jet, or None for linear 0..1000 -> 0..max_force_n.
+    resolution: integration steps of the twin's Cosserat rod.
+    """
+
+    true_params: ModelParameters = field(default_factory=ModelParameters)
+    hidden_effects: tuple[Effect | str, ...] = ()
+    hidden_effect_values: tuple[tuple[str, float], ...] = ()
+    noise: SensorNoise = field(default_factory=SensorNoise)
+    seed: int = 0
+    base_orientation_in_world: tuple[float, float, float, float] = HANGING_BASE_ORIENTATION
+    base_position_in_world_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gravity_in_world_m_s2: tuple[float, float, float] | None = None
+    magnetic_field_in_world_ut: tuple[float, float, float] = DEFAULT_MAGNETIC_FIELD_UT
+    base_sensor: SensorMounting = field(default_factory=SensorMounting)
+    tip_sensor: SensorMounting = field(default_factory=SensorMounting)
+    settle_time_constant_s: float = 0.5
+    max_force_n: float = 0.1
+    jet_response: tuple[JetResponse, JetResponse, JetResponse] | None = None
+    resolution: int = 20
+
+    def __post_init__(self) -> None:
+        owner = "TwinConfig"
+        if not isinstance(self.true_params, ModelParameters):
+            raise ValueError(f"{owner}.true_params must be ModelParameters, got {type(self.true_params).__name__}")
+        effects = self.hidden_effects
+        if isinstance(effects, (str, bytes)) or not isinstance(effects, Sequence):
+            raise ValueError(f"{owner}.hidden_effects must be a sequence of effects or names, got {effects!r}")
+        loaded = tuple(load_effect(e) if isinstance(e, str) else e for e in effects)
+        for effect in loaded:
+            if not isinstance(effect, Effect):
+                raise ValueError(f"{owner}.hidden_effects: {effect!r} is not an Effect "
+                                 "(see hydrojet_bench.effects.base.Effect)")
+        names = [e.name for e in loaded]
+        if len(set(names)) != len(names):
+            raise ValueError(f"{owner}.hidden_effects lists an effect twice: {names}")
+        object.__setattr__(self, "hidden_effects", loaded)
+        values = self.hidden_effect_values
+        pairs = values.items() if isinstance(values, Mapping) else values
+        known = {f"{e.name}.{p.name}": p for e in self.effects for p in e.parameters}
+        checked = []
+        for key, value in pairs:
+            if key not in known:
+                raise ValueError(f"{owner}.hidden_effect_values key {key!r} is no parameter of the twin's "
+                                 f"effects; known: {', '.join(sorted(known)) or 'none'}")
+            number = _number(owner, f"hidden_effect_values[{key!r}]", value)
+            parameter = known[key]
+            if not parameter.lower <= number <= parameter.upper:
+                raise ValueError(f"{owner}.hidden_effect_values[{key!r}] = {number} is outside "
+                                 f"[{parameter.lower}, {parameter.upper}] {parameter.unit}")
+            checked.append((key, number))
+        object.__setattr__(self, "hidden_effect_values", tuple(sorted(checked)))
+        if not isinstance(self.noise, SensorNoise):
+            raise ValueError(f"{owner}.noise must be a SensorNoise, got {type(self.noise).__name__}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise ValueError(f"{owner}.seed must be a non-negative integer, got {self.seed!r}")
+        object.__setattr__(self, "base_orientation_in_world",
+                           _unit_quaternion(owner, "base_orientation_in_world", self.base_orientation_in_world))
+        object.__setattr__(self, "base_position_in_world_m",
+                           _vector(owner, "base_position_in_world_m", self.base_position_in_world_m, 3))
+        if self.gravity_in_world_m_s2 is not None:
+            object.__setattr__(self, "gravity_in_world_m_s2",
+                               _vector(owner, "gravity_in_world_m_s2", self.gravity_in_world_m_s2, 3))
+        object.__setattr__(self, "magnetic_field_in_world_ut",
+                           _vector(owner, "magnetic_field_in_world_ut", self.magnetic_field_in_world_ut, 3))
+        for name in ("base_sensor", "tip_sensor"):
+            if not isinstance(getattr(self, name), SensorMounting):
+                raise ValueError(f"{owner}.{name} must be a SensorMounting")
+        object.__setattr__(self, "settle_time_constant_s",
+                           _non_negative(owner, "settle_time_constant_s", self.settle_time_constant_s))
+        max_force = _number(owner, "max_force_n", self.max_force_n)
+        if max_force <= 0:
+            raise ValueError(f"{owner}.max_force_n must be > 0, got {self.max_force_n!r}")
+        object.__setattr__(self, "max_force_n", max_force)
+        if self.jet_response is not None:
+            responses = tuple(self.jet_response)
+            if len(responses) != JET_COUNT or not all(isinstance(r, JetResponse) for r in responses):
+                raise ValueError(f"{owner}.jet_response must be {JET_COUNT} JetResponse items or None")
+            object.__setattr__(self, "jet_response", responses)
+        if isinstance(self.resolution, bool) or not isinstance(self.resolution, (int, np.integer)) \
+                or self.resolution < 1:
+            raise ValueError(f"{owner}.resolution must be an integer >= 1, got {self.resolution!r}")
+
+    @classmethod
+    def from_profile(cls, profile: RigProfile, **changes: object) -> "TwinConfig":
+        """The twin of a rig profile: its gravity (tracker frame), clamp pose, sensor
+        mountings and per-jet force limits (linear valve responses up to each limit);
+        true parameters from its rod, capsule and jets unless ``true_params`` is given.
+        ``changes`` are further fields (``hidden_effects=``, ``noise=``, ``seed=`` ...)."""
+        if not isinstance(profile, RigProfile):
+            raise ValueError(f"profile must be a RigProfile, got {type(profile).__name__}")
+        values: dict[str, object] = {
+            "true_params": profile.model_parameters(),
+            "gravity_in_world_m_s2": profile.gravity_in_tracker_m_s2,
+            "base_orientation_in_world": profile.base_orientation_in_tracker,
+            "base_position_in_world_m": profile.base_position_in_tracker_m,
+            "base_sensor": profile.base_sensor,
+            "tip_sensor": profile.tip_sensor,
+            "max_force_n": max(profile.max_jet_force_n),
+            "jet_response": tuple(JetResponse.linear(limit) for limit in profile.max_jet_force_n),
+        }
+        values.update(changes)
+        return cls(**values)  # type: ignore[arg-type]
+
+    @property
+    def effects(self) -> tuple[Effect, ...]:
+        """The twin's physics beyond the nominal rod: gravity, then the hidden effects."""
+        if any(e.name == "gravity" for e in self.hidden_effects):
+            return self.hidden_effects
+        return (load_effect("gravity"),) + self.hidden_effects
+
+    @property
+    def jet_responses(self) -> tuple[JetResponse, ...]:
+        """The per-jet valve responses in use (the linear default filled in)."""
+        if self.jet_response is not None:
+            return self.jet_response
+        return (JetResponse.linear(self.max_force_n),) * JET_COUNT
