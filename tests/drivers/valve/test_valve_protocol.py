@@ -37,6 +37,8 @@ from drivers.valve.protocol import (
 )
 
 SETTINGS = settings(max_examples=200, deadline=None)
+# One longest frame's worth of zero bytes: enough to disprove any false LEN.
+IDLE = bytes(HEADER_LEN + MAX_PAYLOAD + CRC_LEN)
 
 duty = st.integers(0, 1000)
 duties = st.tuples(duty, duty, duty)
@@ -144,7 +146,9 @@ def _is_subsequence(wanted: list[Frame], got: list[Frame]) -> bool:
     st.integers(1, 7),
 )
 def test_decoder_resyncs_after_garbage(chunks, tail: bytes, piece: int) -> None:
-    stream = b"".join(garbage + encode_frame(f) for garbage, f in chunks) + tail
+    # Garbage can hold a false SOF whose LEN swallows the next frame until later bytes
+    # fail its CRC; IDLE supplies them.
+    stream = b"".join(garbage + encode_frame(f) for garbage, f in chunks) + tail + IDLE
     decoder = FrameDecoder()
     got: list[Frame] = []
     for i in range(0, len(stream), piece):  # fed in small pieces, as a UART delivers
@@ -160,10 +164,8 @@ def test_decoder_recovers_every_other_frame_after_a_corrupted_one(frame_list, da
     pos = data.draw(st.integers(0, len(encoded[victim]) - 1))
     encoded[victim][pos] ^= data.draw(st.integers(1, 255))
     # A corrupted LEN makes the decoder wait for bytes that would disprove it; on a live
-    # line later traffic (the heartbeat) supplies them. Idle bytes, one longest frame's
-    # worth, stand in for that traffic here.
-    idle = bytes(HEADER_LEN + MAX_PAYLOAD + CRC_LEN)
-    got = FrameDecoder().feed(b"".join(bytes(e) for e in encoded) + idle)
+    # line later traffic (the heartbeat) supplies them, as IDLE does here.
+    got = FrameDecoder().feed(b"".join(bytes(e) for e in encoded) + IDLE)
     others = [f for i, f in enumerate(frame_list) if i != victim]
     assert _is_subsequence(others, got)
 
