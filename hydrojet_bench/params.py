@@ -1,7 +1,8 @@
 """Physical parameters of the rod and the rig, in SI units.
 
-Frames: the *base frame* is the clamp's frame, its z axis along the undeformed rod and
-pointing from base to tip; the *tip frame* is the rod's material frame at s = L (z along
+Frames: the *base frame* is the fixed clamp holder's frame, its z axis along the
+undeformed rod and pointing from base to tip (a compliant clamp turns the rod's first
+section relative to it; the base sensor sits on the holder); the *tip frame* is the rod's material frame at s = L (z along
 the tangent). Jets act in the tip frame's xy plane (paper eq. 5).
 
 Every dataclass is frozen and validates itself: a bad value raises `ValueError` naming

@@ -88,10 +88,10 @@ class Solution:
 
     def tip_sensor_in_base_sensor(self) -> np.ndarray:
         """Rotation of the tip sensor relative to the base sensor: what two orientation
-        sensors measure (paper eq. 24's h), including any mounting rotations."""
-        base_sensor = self.rotations_in_base[0] @ self.base_sensor_mounting
-        tip_sensor = self.tip_rotation_in_base @ self.tip_sensor_mounting
-        return base_sensor.T @ tip_sensor
+        sensors measure (paper eq. 24's h), including any mounting rotations. The base
+        sensor sits on the fixed holder (the base frame), not on the rod: a compliant
+        clamp turns the rod relative to it, which is how such a clamp shows up."""
+        return self.base_sensor_mounting.T @ self.tip_rotation_in_base @ self.tip_sensor_mounting
 
     def tip_sensor_quaternion(self) -> np.ndarray:
         """`tip_sensor_in_base_sensor` as a quaternion (w, x, y, z)."""

@@ -385,8 +385,10 @@ class DigitalTwin:
 
     def _equilibrium_poses(self, solution: Solution) -> tuple[np.ndarray, np.ndarray]:
         """(2, 4) orientations and (2, 3) positions of the sensors on this equilibrium."""
-        body_rotation = np.stack([solution.rotations_in_base[0], solution.rotations_in_base[-1]])
-        body_position = np.stack([solution.positions_in_base_m[0], solution.positions_in_base_m[-1]])
+        # The base sensor sits on the fixed holder (the base frame), not on the rod's first
+        # section, which a compliant clamp turns.
+        body_rotation = np.stack([np.eye(3), solution.rotations_in_base[-1]])
+        body_position = np.stack([np.zeros(3), solution.positions_in_base_m[-1]])
         effect_mounting = np.stack([solution.base_sensor_mounting, solution.tip_sensor_mounting])
         rotation = self._base_rotation @ body_rotation @ effect_mounting @ self._mount_rotation
         position = self._base_position_m + (self._base_rotation @ (
