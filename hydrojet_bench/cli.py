@@ -18,7 +18,7 @@ from . import __version__
 from .errors import UserError
 
 # Order is the order shown in --help.
-COMMAND_MODULES = ("demo", "perf", "emulate")
+COMMAND_MODULES = ("demo", "simulate", "calibrate", "compare", "perf", "emulate")
 
 
 def build_parser() -> argparse.ArgumentParser:
