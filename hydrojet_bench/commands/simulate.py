@@ -16,7 +16,8 @@ from ..data.csv_io import write_csv
 from ..effects import load_effect
 from ..plans import paper_protocol
 from ..profile import load_profile
-from ..twin import DigitalTwin, TwinConfig
+from ..twin import DigitalTwin
+from ..twin.profile_table import twin_config
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -25,17 +26,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--profile", default="sim", help="rig profile (default: sim)")
     parser.add_argument("--hidden", action="append", default=[], metavar="EFFECT",
                         help="physics the twin has and the models may not: a library name or "
-                             "path/to/file.py:Class (repeatable)")
-    parser.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+                             "path/to/file.py:Class (repeatable; replaces the profile's [twin] hidden_effects)")
+    parser.add_argument("--seed", type=int, default=None, help="noise seed (default: the profile's, else 0)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     profile = load_profile(args.profile)
-    hidden = tuple(load_effect(spec) for spec in args.hidden)
-    twin = DigitalTwin(TwinConfig.from_profile(profile, hidden_effects=hidden, seed=args.seed))
+    changes: dict[str, object] = {}
+    if args.hidden:
+        changes["hidden_effects"] = tuple(load_effect(spec) for spec in args.hidden)
+    if args.seed is not None:
+        changes["seed"] = args.seed
+    config = twin_config(profile, **changes)
+    hidden = config.hidden_effects
+    twin = DigitalTwin(config)
     recording = twin.run_plan(paper_protocol())
-    rows = write_csv(recording.to_dataset(profile, f"twin seed {args.seed}"), args.output)
+    rows = write_csv(recording.to_dataset(profile, f"twin seed {config.seed}"), args.output)
     hidden_names = ", ".join(effect.name for effect in hidden) or "none"
     Console().print(f"wrote {rows} samples (229 steps: 40 calibration poses, 9 sweeps) to {args.output}; "
                     f"hidden effects: {hidden_names}")
