@@ -15,6 +15,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from ..errors import UserError
 from ..models import CosseratModel, PrbModel
 from ..params import ModelParameters
 
@@ -28,8 +29,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..errors import UserError
-
     if not (np.isfinite(args.max_force) and args.max_force > 0):
         raise UserError(f"--max-force must be a positive number of newtons, got {args.max_force}")
     if args.steps < 1:
