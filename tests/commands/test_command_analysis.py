@@ -5,32 +5,21 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-import textwrap
+from pathlib import Path
 
 import pytest
 
 from hydrojet_bench.cli import main
 
-HIDDEN = textwrap.dedent("""
-    import numpy as np
-
-    class CloggedJet:
-        name = "clogged_jet"
-        explanation = "jet 2 delivers 60 % of its force"
-        parameters = ()
-        uses_actuation = False
-
-        def apply(self, problem, values):
-            problem.jet_gains = np.array([1.0, 0.6, 1.0])
-    """)
+# The documented example hidden effect: jet 2 delivers 60 % of its commanded force.
+CLOGGED_JET = Path(__file__).resolve().parents[2] / "docs/examples/clogged_jet.py"
 
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     folder = tmp_path_factory.mktemp("twin")
-    (folder / "hidden.py").write_text(HIDDEN)
     data = folder / "twin.csv"
-    assert main(["simulate", "-o", str(data), "--hidden", f"{folder / 'hidden.py'}:CloggedJet", "--seed", "5"]) == 0
+    assert main(["simulate", "-o", str(data), "--hidden", f"{CLOGGED_JET}:CloggedJet", "--seed", "5"]) == 0
     return folder, data
 
 
