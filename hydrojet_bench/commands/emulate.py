@@ -1,9 +1,10 @@
 """`hydrojet-bench emulate aurora|valves`: serve a device emulator on a pseudo-terminal.
 
 Prints the pty path and runs until Ctrl-C, so that any other program (a script, a
-vendor tool, a real client library) can be pointed at it. The emulator is driven by a
-plant at rest: the base sensor at the origin and the tip 70 mm below it. (The digital
-twin and rig profiles will drive it once they exist.)
+vendor tool, a real client library) can be pointed at it. The emulator's truth is the
+digital twin of a sim profile (``--profile``, default ``sim``: its rod, clamp pose,
+sensor mountings and hidden effects), at rest until the valve emulator opens a jet; or,
+with ``--static``, a plant whose base sits at the origin and tip 70 mm below it.
 """
 
 from __future__ import annotations
@@ -20,14 +21,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("device", choices=("aurora", "valves"), help="which device to emulate")
     parser.add_argument("--watchdog-ms", type=float, default=500.0,
                         help="valves: firmware watchdog period in ms (default 500)")
+    parser.add_argument("--profile", default="sim",
+                        help="sim profile whose digital twin drives the emulator (default: sim)")
+    parser.add_argument("--static", action="store_true",
+                        help="serve a static pose instead of the digital twin")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from drivers.plant import StaticPlant
-
     console = Console(stderr=True)
-    plant = StaticPlant()
+    plant = _plant(args)
     if args.device == "valves":
         if not args.watchdog_ms > 0:
             raise UserError(f"--watchdog-ms must be positive, got {args.watchdog_ms}")
@@ -41,3 +44,15 @@ def run(args: argparse.Namespace) -> int:
         serve_pty(plant, announce=lambda line: print(line, flush=True))
     console.print("emulator stopped")
     return 0
+
+
+def _plant(args: argparse.Namespace):
+    if args.static:
+        from drivers.plant import StaticPlant
+
+        return StaticPlant()
+    from ..profile import load_profile
+    from ..twin import DigitalTwin
+    from ..twin.profile_table import twin_config
+
+    return DigitalTwin(twin_config(load_profile(args.profile)))

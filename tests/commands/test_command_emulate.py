@@ -9,14 +9,19 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import serial
 
+from drivers.aurora.client import AuroraTracker
 from drivers.aurora.commands import Command
 from drivers.valve.client import ValveController
+from hydrojet_bench.profile import load_profile
+from hydrojet_bench.twin import DigitalTwin
+from hydrojet_bench.twin.profile_table import twin_config
 
 
-def start(device: str) -> tuple[subprocess.Popen, str]:
-    process = subprocess.Popen([sys.executable, "-m", "hydrojet_bench.cli", "emulate", device],
+def start(device: str, *options: str) -> tuple[subprocess.Popen, str]:
+    process = subprocess.Popen([sys.executable, "-m", "hydrojet_bench.cli", "emulate", device, *options],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     line = process.stdout.readline()
     path = line.strip().rsplit(" ", 1)[-1]
@@ -57,3 +62,41 @@ def test_aurora_emulator_answers_init_on_its_pty():
         assert reply.startswith(b"OKAY"), reply
     finally:
         stop(process)
+
+
+def read_tip_position_mm(run_async, path: str) -> np.ndarray:
+    async def session():
+        async with AuroraTracker(f"pty://{path}", ["base", "tip"]) as tracker:
+            return np.array((await tracker.read_frame())["tip"].position_mm)
+
+    return run_async(session, timeout_s=20.0)
+
+
+def test_aurora_emulator_serves_the_sim_profiles_twin_at_rest(run_async):
+    # The sim profile hangs the clamp 0.20 m above the tracker origin with its tip sensor
+    # 10 mm ahead of the rod tip: the twin's rest pose, not the static default.
+    twin = DigitalTwin(twin_config(load_profile("sim")))
+    expected_mm = twin.sensor_poses("tip", 0.0)[1] * 1e3
+    process, path = start("aurora", "--profile", "sim")
+    try:
+        measured_mm = read_tip_position_mm(run_async, path)
+    finally:
+        stop(process)
+    # Emulator position noise is 0.48 mm RMS per axis-combined; 3 mm is > 5 sigma.
+    assert np.linalg.norm(measured_mm - expected_mm) < 3.0, (measured_mm, expected_mm)
+
+
+def test_aurora_emulator_static_pose_on_request(run_async):
+    process, path = start("aurora", "--static")
+    try:
+        measured_mm = read_tip_position_mm(run_async, path)
+    finally:
+        stop(process)
+    assert np.linalg.norm(measured_mm - np.array([0.0, 0.0, -70.0])) < 3.0, measured_mm
+
+
+def test_emulate_rejects_an_unknown_profile_without_traceback():
+    result = subprocess.run([sys.executable, "-m", "hydrojet_bench.cli", "emulate", "aurora", "--profile",
+                             "no-such-profile"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert "no-such-profile" in result.stderr and "Traceback" not in result.stderr
