@@ -9,13 +9,26 @@ from pathlib import Path
 
 from ..errors import UserError
 from .base import Effect, EffectParameter, effect_values, qualified_parameter_names
+from .anisotropic_stiffness import AnisotropicStiffness
+from .base_compliance import BaseCompliance
+from .base_hysteresis import BaseHysteresis
 from .gravity import Gravity
+from .jet_gain import JetGain
+from .jet_misalignment import JetMisalignment
+from .nonlinear_elasticity import NonlinearElasticity
+from .pressure_stiffening import PressureStiffening
+from .sensor_mounting import SensorMounting
+from .stiffness_profile import StiffnessProfile
 
-# Canonical library. The analysis work adds jet_gain, jet_misalignment,
-# nonlinear_elasticity, pressure_stiffening, base_compliance, base_hysteresis,
-# sensor_mounting, anisotropic_stiffness and stiffness_profile here.
+# Canonical library, in the order users see it: gravity (on by default), then the
+# effects a calibration can add to diagnose a rig, grouped by what they act on
+# (actuation, constitutive law, clamp, measurement). Every default leaves the model
+# unchanged, so a calibration that adds an effect starts from the nominal model.
 LIBRARY: dict[str, type] = {
-    Gravity.name: Gravity,
+    effect.name: effect
+    for effect in (Gravity, JetGain, JetMisalignment, PressureStiffening, NonlinearElasticity,
+                   AnisotropicStiffness, StiffnessProfile, BaseCompliance, BaseHysteresis,
+                   SensorMounting)
 }
 
 __all__ = ["Effect", "EffectParameter", "LIBRARY", "effect_values", "load_effect",
@@ -27,7 +40,7 @@ def load_effect(spec: str) -> Effect:
     if spec in LIBRARY:
         return LIBRARY[spec]()
     if ":" not in spec:
-        raise UserError(f"unknown effect {spec!r}; known effects: {', '.join(sorted(LIBRARY))}, "
+        raise UserError(f"unknown effect {spec!r}; known effects: {', '.join(LIBRARY)}, "
                         "or give a file as path/to/my_effect.py:ClassName")
     path_text, _, class_name = spec.rpartition(":")
     path = Path(path_text)

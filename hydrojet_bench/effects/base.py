@@ -14,6 +14,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar, Protocol, runtime_checkable
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from ..models.problem import RodProblem
     from ..params import ModelParameters
 
@@ -65,3 +67,12 @@ def effect_values(effect: Effect, params: ModelParameters) -> dict[str, float]:
 
 def qualified_parameter_names(effect: Effect) -> tuple[str, ...]:
     return tuple(f"{effect.name}.{p.name}" for p in effect.parameters)
+
+
+def scale_modulus(problem: RodProblem, factor: float | np.ndarray) -> None:
+    """Multiply the section's bending and torsional stiffness by ``factor`` (a scalar or
+    one value per sample point): a change of E, which carries G = E / (2 (1 + nu)) along.
+    Assigns new arrays, so arrays shared with another problem are left alone."""
+    problem.bending_stiffness_x_nm2 = problem.bending_stiffness_x_nm2 * factor
+    problem.bending_stiffness_y_nm2 = problem.bending_stiffness_y_nm2 * factor
+    problem.torsional_stiffness_nm2 = problem.torsional_stiffness_nm2 * factor
