@@ -121,6 +121,16 @@ def compare(predictions: Predictions, steps: Dataset) -> Comparison:
                       breakdown(orientation, position, bend_bin_labels(measured_bend)), predictions)
 
 
+def compare_methods(model: ShootingModel, params: ModelParameters, steps: Dataset,
+                    online: OnlineSettings | None = None) -> dict[str, Comparison]:
+    """Ref. ("ref": the calibrated, constant disturbance) and, given ``online`` settings,
+    Proposed ("online": online disturbance estimation), each compared on ``steps``."""
+    results = {"ref": compare(predict(model, params, steps), steps)}
+    if online is not None:
+        results["online"] = compare(predict(model, params, steps, online), steps)
+    return results
+
+
 def measured_bend_deg(steps: Dataset) -> np.ndarray:
     """Bending angle of each row from the measured tip orientation: the angle between the
     clamp axis and the tip tangent (z axes), degrees."""

@@ -58,12 +58,16 @@ def summarise(orientation_deg: np.ndarray, position_mm: np.ndarray | None = None
     )
 
 
+def bend_bin_names(edges: Sequence[float] = BEND_BIN_EDGES_DEG) -> list[str]:
+    """The bending-angle bins' labels, smallest first: "10", "25", "50", "75", ">75"."""
+    return [f"{edge:g}" for edge in edges] + [f">{edges[-1]:g}"]
+
+
 def bend_bin_labels(bend_deg: np.ndarray, edges: Sequence[float] = BEND_BIN_EDGES_DEG) -> np.ndarray:
     """Label of each sample's bending-angle bin: "10", "25", "50", "75" (upper edges,
     inclusive) or ">75"."""
     bend = np.asarray(bend_deg, dtype=float)
-    labels = np.array([f"{edge:g}" for edge in edges] + [f">{edges[-1]:g}"])
-    return labels[np.searchsorted(np.asarray(edges), bend, side="left")]
+    return np.array(bend_bin_names(edges))[np.searchsorted(np.asarray(edges), bend, side="left")]
 
 
 def breakdown(orientation_deg: np.ndarray, position_mm: np.ndarray | None, groups: np.ndarray) -> dict:

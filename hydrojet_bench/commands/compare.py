@@ -1,94 +1,313 @@
-"""`hydrojet-bench compare DATA --params P [--online] [--json FILE] [--report DIR]`.
+"""`hydrojet-bench compare DATA --params P [--baseline B] [--online] [--json FILE] [--report DIR]`.
 
 Predicts every validation step (sweep >= 0; all steps when there are no sweeps) with the
 calibrated, constant disturbance ("Ref.") and, with --online, with online disturbance
-estimation ("Proposed"), and reports the errors as the paper's Table II does.
+estimation ("Proposed"), and reports the errors as the paper's Table II does, then where
+the model fails (`hydrojet_bench.analysis.breakdowns`). With --baseline, a second
+parameter file (say, calibrated before an effect was added) is predicted on the same
+steps and the errors are shown before and after.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from ..analysis.compare import Comparison, compare, predict
+from ..analysis.breakdowns import (MISSING_LABEL, STRAIGHT, STRAIGHT_BELOW_DEG, Breakdowns, break_down,
+                                   direction_order, disturbance_by_sweep, per_step)
+from ..analysis.compare import Comparison, compare_methods
+from ..analysis.metrics import ErrorSummary
+from ..data.dataset import Dataset
+from ..effects import LIBRARY, load_effect
 from ..errors import UserError
 from ..estimation import OnlineSettings
-from ..params_io import read_parameter_file
+from ..models.shooting import ShootingModel
+from ..params_io import ParameterFile, read_parameter_file
 from .common import add_data_arguments, add_model_arguments, build_model, load_steps
+
+LABELS = {"ref": "Ref.", "online": "Proposed"}
+BREAKDOWN_KEYS = ("by_jet", "by_direction", "by_region", "loading_unloading", "over_time", "worst_poses")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("compare", help="model predictions against measurements (Table II)")
+    parser = subparsers.add_parser("compare", help="model predictions against measurements (Table II), "
+                                   "where the model fails, before/after an added effect")
     add_data_arguments(parser)
     add_model_arguments(parser, default_model=None)
     parser.add_argument("--params", type=Path, required=True, help="parameter file from `calibrate`")
+    parser.add_argument("--baseline", type=Path, metavar="BEFORE",
+                        help="a second parameter file (e.g. calibrated without the added effect), "
+                             "predicted on the same data with its own model and effects: errors before/after")
     parser.add_argument("--online", action="store_true", help="also run online disturbance estimation")
     parser.add_argument("--json", type=Path, metavar="FILE", help="write the figures as JSON")
     parser.add_argument("--report", type=Path, metavar="DIR", help="write figures (PNG) to this folder")
+    parser.epilog = ("--effect adds effects to the --params model only; it also names the file of an effect "
+                     "that a parameter file lists by name (e.g. one calibrated from path/to/file.py:Class).")
     parser.set_defaults(func=run)
 
 
+@dataclass(frozen=True)
+class Evaluation:
+    """One parameter file's model predicted on the compared steps: a Comparison and its
+    Breakdowns per method ("ref", "online")."""
+
+    source: Path
+    model: ShootingModel
+    results: dict[str, Comparison]
+    breakdowns: dict[str, Breakdowns]
+
+    @property
+    def label(self) -> str:
+        return f"{self.source} ({self.model.name}; {', '.join(e.name for e in self.model.effects)})"
+
+
 def run(args: argparse.Namespace) -> int:
-    parameter_file = read_parameter_file(args.params)
-    model_name = args.model or parameter_file.model
+    after_file = read_parameter_file(args.params)
+    before_file = None if args.baseline is None else read_parameter_file(args.baseline)
     profile, steps = load_steps(args)
-    model, _ = build_model(model_name, list(parameter_file.effects) + args.effect)
-    params = parameter_file.apply(profile.model_parameters(), args.params)
     validation = steps.select(steps.sweep >= 0) if (steps.sweep >= 0).any() else steps
     if len(validation) == 0:
         raise UserError(f"{args.data}: no steps to compare")
-    results = {"ref": compare(predict(model, params, validation), validation)}
-    if args.online:
-        results["online"] = compare(predict(model, params, validation, OnlineSettings()), validation)
-    print_tables(Console(), results, f"{model.name} on {args.data}")
+    named_files = {load_effect(spec).name: spec for spec in args.effect}
+
+    def evaluate(parameter_file: ParameterFile, path: Path, added: list[str]) -> Evaluation:
+        model = _model_for(parameter_file, path, args.model, named_files, added)
+        params = parameter_file.apply(profile.model_parameters(), path)
+        results = compare_methods(model, params, validation, OnlineSettings() if args.online else None)
+        return Evaluation(path, model, results, {key: break_down(c, validation) for key, c in results.items()})
+
+    after = evaluate(after_file, args.params, args.effect)
+    before = None if before_file is None else evaluate(before_file, args.baseline, [])
+    console = Console()
+    print_tables(console, after.results, f"{after.model.name} on {args.data}")
+    print_breakdowns(console, after, validation)
+    if before is not None:
+        print_before_after(console, before, after)
     if args.json:
-        write_json(args.json, results)
+        write_json(args.json, validation, after, before)
     if args.report:
         from ..analysis.report import write_report
 
-        for path in write_report(args.report, results, validation, model.name):
-            Console().print(f"wrote {path}")
+        for path in write_report(args.report, after.results, validation, after.model.name,
+                                 baseline=None if before is None else before.results):
+            console.print(f"wrote {path}")
     return 0
 
 
+def _model_for(parameter_file: ParameterFile, path: Path, model_name: str | None, named_files: dict[str, str],
+               added: list[str]) -> ShootingModel:
+    """The file's model (or ``model_name``) with the file's effects, file effects found
+    by name among the --effect specs, plus the ``added`` effect specs."""
+    specs = [named_files.get(name, name) for name in parameter_file.effects]
+    for spec in specs:
+        if spec not in LIBRARY and ":" not in spec:
+            raise UserError(f"{path}: effect {spec!r} is not in the library ({', '.join(sorted(LIBRARY))}); "
+                            "if it comes from a file, give that file with --effect path/to/file.py:ClassName")
+    try:
+        model, _ = build_model(model_name or parameter_file.model, specs + list(added))
+    except UserError as error:
+        raise UserError(f"{path}: {error}") from None
+    return model
+
+
+# --- console -------------------------------------------------------------------------
+
+
+def _cells(summary: ErrorSummary | None) -> list[str]:
+    if summary is None:
+        return ["-", "-"]
+    return [f"{summary.orientation_rmse_deg:.2f}",
+            "-" if summary.position_rmse_mm is None else f"{summary.position_rmse_mm:.2f}"]
+
+
+def _method_columns(table: Table, keys) -> None:
+    for key in keys:
+        table.add_column(f"{LABELS[key]} orient. (deg)", justify="right")
+        table.add_column(f"{LABELS[key]} pos. (mm)", justify="right")
+
+
 def print_tables(console: Console, results: dict[str, Comparison], title: str) -> None:
-    labels = {"ref": "Ref.", "online": "Proposed"}
     table = Table(title=f"RMS errors, {title}", caption="bend bins in degrees, as the paper's Table II")
     table.add_column("group", no_wrap=True)
-    for key in results:
-        table.add_column(f"{labels[key]} orient. (deg)", justify="right")
-        table.add_column(f"{labels[key]} pos. (mm)", justify="right")
+    _method_columns(table, results)
     reference = results["ref"]
 
-    def row(label: str, pick) -> None:
-        cells = []
-        for comparison in results.values():
-            summary = pick(comparison)
-            cells += [f"{summary.orientation_rmse_deg:.2f}",
-                      "-" if summary.position_rmse_mm is None else f"{summary.position_rmse_mm:.2f}"]
-        table.add_row(label, *cells)
+    def row(label: str, pick: Callable[[Comparison], ErrorSummary]) -> None:
+        table.add_row(label, *[cell for comparison in results.values() for cell in _cells(pick(comparison))])
 
     row("all", lambda c: c.overall)
     for sweep in reference.by_sweep:
         row(f"sweep {sweep}", lambda c, s=sweep: c.by_sweep[s])
     for bend in reference.by_bend:
-        row(f"bend <={bend}" if not str(bend).startswith(">") else f"bend {bend}",
-            lambda c, b=bend: c.by_bend[b])
+        row(f"bend {_bend_label(bend)}", lambda c, b=bend: c.by_bend[b])
     console.print(table)
 
 
-def write_json(path: Path, results: dict[str, Comparison]) -> None:
-    figures = {key: comparison.as_dict() for key, comparison in results.items()}
-    document = {
-        "orientation_rmse_deg": {key: value["orientation_rmse_deg"] for key, value in figures.items()},
-        "position_rmse_mm": {key: value["position_rmse_mm"] for key, value in figures.items()},
-        "by_sweep": {key: value["by_sweep"] for key, value in figures.items()},
-        "by_bend": {key: value["by_bend"] for key, value in figures.items()},
-    }
+def print_breakdowns(console: Console, evaluation: Evaluation, steps: Dataset) -> None:
+    """Compact tables of where the model fails; the full series go to JSON and plots."""
+    parts = evaluation.breakdowns
+    reference = parts["ref"]
+    table = Table(title=f"Where the model fails: RMS errors by physical grouping ({evaluation.model.name})",
+                  caption="direction: azimuth of the measured tip tangent in the base frame; hysteresis gap: "
+                          "mean norm of the difference of the error vectors at equal forces "
+                          "(noise alone makes it about 1.4 x the RMS)")
+    table.add_column("group", no_wrap=True)
+    table.add_column("n", justify="right")
+    _method_columns(table, parts)
+
+    def across(cells: Callable[[Breakdowns], list[str]]) -> list[str]:
+        return [cell for part in parts.values() for cell in cells(part)]
+
+    def rows(label: str, pick: Callable[[Breakdowns], dict[str, ErrorSummary]], name: Callable[[str], str]) -> None:
+        for key, summary in pick(reference).items():
+            table.add_row(f"{label} {name(key)}", str(summary.count), *across(lambda b: _cells(pick(b).get(key))))
+        table.add_section()
+
+    rows("driven by", lambda b: b.by_jet, str)
+    rows("bending", lambda b: b.by_direction,
+         lambda key: f"straight (< {STRAIGHT_BELOW_DEG:g} deg)" if key == STRAIGHT else f"to {key} deg")
+    for phase in ("loading", "unloading"):
+        summary = getattr(reference.loading, phase)
+        if summary is not None:
+            table.add_row(phase, str(summary.count), *across(lambda b: _cells(getattr(b.loading, phase))))
+    if reference.loading.matched_pairs:
+        table.add_row("hysteresis gap", str(reference.loading.matched_pairs), *across(
+            lambda b: [_number(b.loading.hysteresis_gap_deg), _number(b.loading.hysteresis_gap_mm)]))
+    table.add_section()
+    start = steps.time_s[0]
+    for index, block in enumerate(reference.drift.blocks):
+        table.add_row(f"{(block.start_s - start) / 60:.1f}-{(block.end_s - start) / 60:.1f} min",
+                      str(block.summary.count), *across(lambda b: _cells(b.drift.blocks[index].summary)))
+    table.add_row("trend per min", "", *across(lambda b: [_number(b.drift.trend_deg_per_min, signed=True),
+                                                          _number(b.drift.trend_mm_per_min, signed=True)]))
+    console.print(table)
+    print_region(console, reference, evaluation.model.name)
+    print_worst(console, evaluation)
+    if "online" in evaluation.results:
+        console.print(_missing_line(evaluation.results["online"], steps))
+
+
+def _bend_label(bend_bin: str) -> str:
+    """A Table II bin label ("25", ">75") as a bound: "<=25", ">75"."""
+    return bend_bin if str(bend_bin).startswith(">") else f"<={bend_bin}"
+
+
+def _number(value: float | None, signed: bool = False) -> str:
+    return "-" if value is None else f"{value:+.3f}" if signed else f"{value:.2f}"
+
+
+def print_region(console: Console, reference: Breakdowns, model_name: str) -> None:
+    directions = [d for d in direction_order() if any(d in row for row in reference.by_region.values())]
+    table = Table(title=f"Ref. orientation RMSE (deg) by region of the workspace ({model_name})",
+                  caption="rows: measured bend bin (Table II); columns: bending direction (azimuth, deg)")
+    table.add_column("bend (deg)", no_wrap=True)
+    for direction in directions:
+        table.add_column(direction, justify="right")
+    for bend, row in reference.by_region.items():
+        table.add_row(_bend_label(bend),
+                      *[f"{row[d].orientation_rmse_deg:.2f}" if d in row else "" for d in directions])
+    console.print(table)
+
+
+def print_worst(console: Console, evaluation: Evaluation) -> None:
+    worst = evaluation.breakdowns["ref"].worst
+    online = evaluation.results.get("online")
+    table = Table(title=f"Worst poses of Ref. ({evaluation.model.name})",
+                  caption="row: index among the compared steps; q in mN; bend as measured, deg; "
+                          "errors in deg and mm (azimuths in the JSON)")
+    headers = ["row", "sweep", "step", "q1, q2, q3", "bend", "Ref. orient.", "Ref. pos."]
+    for header in headers + (["Proposed orient."] if online is not None else []):
+        table.add_column(header, justify="right", no_wrap=header.startswith("q"))
+    for pose in worst:
+        cells = [str(pose.index), str(pose.sweep), str(pose.step),
+                 ", ".join(f"{force * 1e3:.0f}" for force in pose.jet_forces_n), f"{pose.bend_deg:.1f}",
+                 f"{pose.orientation_error_deg:.2f}", _number(pose.position_error_mm)]
+        if online is not None:
+            cells.append(f"{online.orientation_error_deg[pose.index]:.2f}")
+        table.add_row(*cells)
+    console.print(table)
+
+
+def _missing_line(online: Comparison, steps: Dataset) -> str:
+    norm_mnm = _moment_norm_nm(online) * 1e3
+    peak = int(np.argmax(norm_mnm))
+    return (f"{MISSING_LABEL.capitalize()} (online disturbance moment): mean norm {norm_mnm.mean():.3f} mN m, "
+            f"largest {norm_mnm[peak]:.3f} mN m at sweep {steps.sweep[peak]} step {steps.step[peak]}; "
+            "per-sweep series in the JSON and the report.")
+
+
+def print_before_after(console: Console, before: Evaluation, after: Evaluation) -> None:
+    console.print(f"before: {before.label}\nafter:  {after.label}")
+    for key in after.results:
+        old, new = before.results[key], after.results[key]
+        table = Table(title=f"{LABELS[key]} RMS errors before -> after")
+        table.add_column("group", no_wrap=True)
+        for quantity in ("orient. (deg)", "pos. (mm)"):
+            for column in ("before", "after", "change"):
+                table.add_column(f"{quantity} {column}" if column == "before" else column, justify="right")
+
+        def row(label: str, pick: Callable[[Comparison], ErrorSummary]) -> None:
+            first, second = pick(old), pick(new)
+            cells = []
+            for name in ("orientation_rmse_deg", "position_rmse_mm"):
+                a, b = getattr(first, name), getattr(second, name)
+                cells += [_number(a), _number(b), _change(a, b)]
+            table.add_row(label, *cells)
+
+        row("all", lambda c: c.overall)
+        for sweep in new.by_sweep:
+            row(f"sweep {sweep}", lambda c, s=sweep: c.by_sweep[s])
+        console.print(table)
+    if "online" in after.results:
+        means = [float(_moment_norm_nm(e.results["online"]).mean()) for e in (before, after)]
+        console.print(f"{MISSING_LABEL.capitalize()} (online disturbance moment, mean norm): "
+                      f"{means[0] * 1e3:.3f} mN m before, {means[1] * 1e3:.3f} mN m after ({_change(*means)})")
+
+
+def _change(before: float | None, after: float | None) -> str:
+    if before is None or after is None:
+        return "-"
+    return f"{(after - before) / before:+.0%}" if before > 0 else f"{after - before:+.2f}"
+
+
+def _moment_norm_nm(online: Comparison) -> np.ndarray:
+    return np.linalg.norm(online.predictions.disturbance_moment_nm, axis=1)
+
+
+# --- JSON ----------------------------------------------------------------------------
+
+
+def figures(evaluation: Evaluation, steps: Dataset) -> dict:
+    """The JSON document of one evaluation: Table II figures keyed by method (the keys
+    `compare` has always written), the breakdowns, per-step series, the missing wrench
+    (with online estimation) and which parameters were evaluated."""
+    results = evaluation.results
+    tables = {key: comparison.as_dict() for key, comparison in results.items()}
+    document = {name: {key: value[name] for key, value in tables.items()}
+                for name in ("orientation_rmse_deg", "position_rmse_mm", "by_sweep", "by_bend")}
+    details = {key: part.as_dict() for key, part in evaluation.breakdowns.items()}
+    document.update({name: {key: value[name] for key, value in details.items()} for name in BREAKDOWN_KEYS})
+    document["per_step"] = {key: per_step(comparison, steps) for key, comparison in results.items()}
+    if "online" in results:
+        document["missing_wrench"] = {
+            "label": MISSING_LABEL, "quantity": "online disturbance estimate, moment part, N m, tip frame",
+            "by_sweep": {str(s): v for s, v in disturbance_by_sweep(results["online"].predictions, steps).items()}}
+    document["parameters"] = {"file": str(evaluation.source), "model": evaluation.model.name,
+                              "effects": [effect.name for effect in evaluation.model.effects]}
+    return document
+
+
+def write_json(path: Path, steps: Dataset, evaluation: Evaluation, baseline: Evaluation | None = None) -> None:
+    document = figures(evaluation, steps)
+    if baseline is not None:
+        document["baseline"] = figures(baseline, steps)
     try:
         path.write_text(json.dumps(document, indent=2) + "\n")
     except OSError as error:

@@ -37,8 +37,7 @@ def test_calibrate_then_compare_reports_table_2_figures(recorded, capsys):
     assert figures["orientation_rmse_deg"]["online"] < 0.6 * figures["orientation_rmse_deg"]["ref"]
     assert set(figures["by_bend"]["ref"]) <= {"10", "25", "50", "75", ">75"}
     assert len(figures["by_sweep"]["ref"]) == 9
-    assert sorted(p.name for p in (folder / "report").iterdir()) == ["disturbance.png", "error_boxes.png",
-                                                                     "tip_paths.png"]
+    assert {"disturbance.png", "error_boxes.png", "tip_paths.png"} <= {p.name for p in (folder / "report").iterdir()}
     assert "Proposed" in capsys.readouterr().out
 
 
