@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
         model=model.name, effects=tuple(effect.name for effect in model.effects),
         parameters=dict(zip(result.names, map(float, result.values))),
         standard_errors=dict(zip(result.names, map(float, result.standard_errors))),
-        calibration={"data": str(args.data), "profile": str(args.profile),
+        calibration={"data": str(args.data), "profile": profile.source,
                      "poses": len(steps.calibration_rows()),
                      "rms_orientation_deg_before": round(result.rms_orientation_deg_before, 4),
                      "rms_orientation_deg_after": round(result.rms_orientation_deg_after, 4)}))

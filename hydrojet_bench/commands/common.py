@@ -11,13 +11,15 @@ from ..data.dataset import Dataset
 from ..effects import Effect, load_effect
 from ..models import MODELS, make_model
 from ..models.shooting import ShootingModel
-from ..profile import RigProfile, load_profile
+from ..profile import RigProfile
 
 
 def add_data_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", type=Path, help="measurements: a CSV file (see hydrojet_bench/data/csv_io.py)")
-    parser.add_argument("--profile", default="sim",
-                        help="rig profile: a TOML file or a shipped name (default: sim)")
+    parser.add_argument("data", type=Path, help="measurements: a CSV file (see hydrojet_bench/data/csv_io.py) "
+                        "or a bench session log (.mcap)")
+    parser.add_argument("--profile", default=None,
+                        help="rig profile: a TOML file or a shipped name (default: the profile embedded in "
+                             "a session log; sim for a CSV file)")
 
 
 def add_model_arguments(parser: argparse.ArgumentParser, default_model: str | None = "cosserat") -> None:
@@ -28,9 +30,13 @@ def add_model_arguments(parser: argparse.ArgumentParser, default_model: str | No
 
 
 def load_steps(args: argparse.Namespace) -> tuple[RigProfile, Dataset]:
-    """The profile and the data reduced to one row per quasistatic step."""
-    profile = load_profile(args.profile)
-    return profile, load_dataset(args.data, profile).quasistatic_steps()
+    """The profile and the data reduced to one row per quasistatic step. Without
+    ``--profile``, a session log brings its own profile and a CSV file gets "sim"."""
+    profile = args.profile
+    if profile is None and Path(args.data).suffix.lower() != ".mcap":
+        profile = "sim"
+    dataset = load_dataset(args.data, profile)
+    return dataset.profile, dataset.quasistatic_steps()
 
 
 def build_model(name: str, effect_specs: list[str]) -> tuple[ShootingModel, tuple[Effect, ...]]:

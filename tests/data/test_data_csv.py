@@ -159,7 +159,7 @@ def test_load_dataset_dispatches_on_suffix(tmp_path: Path) -> None:
     data = load_dataset(path, "sim")
     assert len(data) == 4 and data.profile.name == "sim"
     assert load_dataset(path, load_profile("sim")).profile.name == "sim"
-    with pytest.raises(UserError, match="MCAP import arrives with the bench"):
+    with pytest.raises(UserError, match="run.mcap"):
         load_dataset(tmp_path / "run.mcap", "sim")
     with pytest.raises(UserError, match="unknown data format '.txt'"):
         load_dataset(tmp_path / "run.txt", "sim")

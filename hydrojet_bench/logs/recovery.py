@@ -1,0 +1,106 @@
+"""`recover_log`: rewrite whatever of a log is readable into a valid, finished MCAP file.
+
+Records are copied as they are (message bytes, times and sequence numbers untouched),
+so the copy of a complete log holds the same messages, and the copy of a truncated one
+the whole messages before the cut, now with a summary and footer that any MCAP reader
+(`mcap.reader.make_reader`, Foxglove, Lichtblick) accepts.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
+from mcap.writer import CompressionType, Writer
+
+from ..errors import UserError
+from .reader import start_time_ns
+from .records import RecordScanner
+from .schemas import LOG_METADATA_NAME
+from .writer import LIBRARY
+
+
+@dataclass(frozen=True)
+class RecoveryReport:
+    """What `recover_log` kept.
+
+    messages: messages written to the recovered file.
+    last_t_s, first_t_s: session time of the last and first of them, s (None if none);
+        from the log's start time, or relative to the first message if it has none.
+    truncated: the input did not end properly (killed writer, cut or damaged file).
+    """
+
+    messages: int
+    last_t_s: float | None
+    truncated: bool
+    first_t_s: float | None = None
+
+
+def recovered_path(log: str | Path) -> Path:
+    """Where `hydrojet-bench recover` writes by default: ``run.mcap`` -> ``run.recovered.mcap``."""
+    return Path(log).with_suffix(".recovered.mcap")
+
+
+def recover_log(src: str | Path, dst: str | Path) -> RecoveryReport:
+    """Copy every whole record of ``src`` (a log, possibly truncated) into a finished MCAP
+    file ``dst``. ``dst`` appears only once complete (written beside it, then renamed).
+    Raises `UserError` if ``src`` is not MCAP, cannot be read, or is ``dst``."""
+    src, dst = Path(src), Path(dst)
+    if dst.exists() and src.exists() and os.path.samefile(src, dst):
+        raise UserError(f"{dst}: the recovered log must not overwrite its source; choose another output")
+    partial = dst.with_name(dst.name + ".partial")
+    try:
+        with partial.open("wb") as handle:
+            report = _copy(RecordScanner(src), Writer(handle, compression=CompressionType.ZSTD))
+        os.replace(partial, dst)
+    except OSError as error:
+        partial.unlink(missing_ok=True)
+        raise UserError(f"{dst}: cannot write: {error.strerror or error}") from None
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
+    return report
+
+
+def _copy(scanner: RecordScanner, writer: Writer) -> RecoveryReport:
+    started = False
+    schemas: dict[int, int] = {0: 0}  # source id -> copy id; 0 is "no schema" in both
+    channels: dict[int, int] = {}
+    start_ns: int | None = None
+    first: int | None = None
+    last: int | None = None
+    count = 0
+    for record in scanner:
+        if not started:
+            header = record if isinstance(record, Header) else Header(profile="", library=LIBRARY)
+            writer.start(profile=header.profile, library=header.library)
+            started = True
+        if isinstance(record, Metadata):
+            writer.add_metadata(record.name, record.metadata)
+            if record.name == LOG_METADATA_NAME:
+                start_ns = start_time_ns(record.metadata)
+        elif isinstance(record, Schema) and record.id not in schemas:
+            schemas[record.id] = writer.register_schema(record.name, record.encoding, record.data)
+        elif isinstance(record, Channel) and record.id not in channels and record.schema_id in schemas:
+            channels[record.id] = writer.register_channel(record.topic, record.message_encoding,
+                                                          schemas[record.schema_id], record.metadata)
+        elif isinstance(record, Message) and record.channel_id in channels:
+            writer.add_message(channels[record.channel_id], log_time=record.log_time, data=record.data,
+                               publish_time=record.publish_time, sequence=record.sequence)
+            first = record.log_time if first is None else first
+            last = record.log_time
+            count += 1
+        elif isinstance(record, Attachment):
+            writer.add_attachment(record.create_time, record.log_time, record.name, record.media_type, record.data)
+    if not started:
+        writer.start(library=LIBRARY)
+    writer.finish()
+    origin = first if start_ns is None else start_ns
+
+    def session_time(log_time: int | None) -> float | None:
+        return None if log_time is None or origin is None else (log_time - origin) / 10**9
+
+    return RecoveryReport(messages=count, last_t_s=session_time(last), truncated=not scanner.complete,
+                          first_t_s=session_time(first))

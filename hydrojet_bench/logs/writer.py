@@ -1,0 +1,216 @@
+"""`LogWriter`: one bench session into one MCAP file that survives being killed.
+
+The file is chunked. The open chunk is closed and handed to the operating system
+whenever ``flush_interval_s`` of wall time has passed since the last flush (checked on
+each write) and on `LogWriter.flush`; a chunk is all-or-nothing, so a SIGKILL loses at
+most the data of the last ``flush_interval_s`` (plus one message interval). No fsync:
+data handed to the OS outlives the process; only a power cut can lose more.
+
+Layout: header, `LOG_METADATA_NAME` (format version, wall time of ``t_s = 0``), the
+caller's metadata records, then chunks holding each topic's schema and channel (written
+with its first message) and the messages. `close` adds the summary and footer.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
+from numpy.typing import ArrayLike
+
+from .. import __version__
+from ..errors import UserError
+from ..params import RodParameters
+from .codec import encode, jsonable
+from .schemas import (FORMAT_VERSION, LINE_STRIP, LOG_METADATA_NAME, MESSAGE_ENCODING, SCHEMA_ENCODING,
+                      START_TIME_KEY, TOPICS, schema_problem)
+
+LIBRARY = f"hydrojet-bench {__version__}; {LIBRARY_IDENTIFIER}"
+_NS_PER_S = 1_000_000_000
+# The HydroJet sleeve's diameter: drawn at true width, the backbone looks like the rod.
+DEFAULT_BACKBONE_THICKNESS_M = 2 * RodParameters().radius_m
+DEFAULT_BACKBONE_COLOR = (0.95, 0.55, 0.1, 1.0)
+
+
+class LogWriter:
+    """Writes a session log (see the module docstring); a context manager.
+
+    path: the .mcap file, created or overwritten.
+    metadata: named records of string keys and values, e.g. ``{"bench": {"profile_name":
+        "sim", "profile_toml": "..."}}``; written right after the header, so they survive
+        any crash. The name ``"hydrojet_bench.log"`` is reserved.
+    start_time_unix_s: wall-clock time of session time 0, s since the Unix epoch
+        (default: now). Message times in the file are this plus ``t_s``, in ns.
+    flush_interval_s: wall time between automatic flushes, s.
+
+    `write` raises ValueError for an unknown topic or a message that breaks its topic's
+    schema (`hydrojet_bench.logs.schemas`), naming the field.
+    """
+
+    def __init__(self, path: str | Path, metadata: Mapping[str, Mapping[str, str]] | None = None,
+                 start_time_unix_s: float | None = None, flush_interval_s: float = 1.0) -> None:
+        if not flush_interval_s > 0:
+            raise ValueError(f"flush_interval_s must be > 0 s, got {flush_interval_s!r}")
+        records = _checked_metadata(metadata or {})
+        start_s = time.time() if start_time_unix_s is None else float(start_time_unix_s)
+        if not (np.isfinite(start_s) and start_s >= 0):
+            raise ValueError(f"start_time_unix_s must be a finite time >= 0 s, got {start_time_unix_s!r}")
+        self.path = Path(path)
+        whole_s = int(start_s)  # split: start_s * 1e9 alone would round to 256 ns
+        self.start_time_ns = whole_s * _NS_PER_S + round((start_s - whole_s) * _NS_PER_S)
+        self.flush_interval_s = float(flush_interval_s)
+        try:
+            self._stream = self.path.open("wb")
+        except OSError as error:
+            raise UserError(f"{self.path}: cannot write the session log: {error.strerror or error}") from None
+        # Chunks are closed by time (flush_interval_s); the size limit only caps memory.
+        self._writer = Writer(self._stream, chunk_size=4 * 1024 * 1024, compression=CompressionType.ZSTD)
+        self._writer.start(library=LIBRARY)
+        self._writer.add_metadata(LOG_METADATA_NAME, {"format_version": FORMAT_VERSION,
+                                                      START_TIME_KEY: str(self.start_time_ns)})
+        for name, values in records.items():
+            self._writer.add_metadata(name, values)
+        self._channels: dict[str, int] = {}
+        self._sequence: dict[int, int] = {}
+        self._closed = False
+        self.flush()
+
+    # --- writing ------------------------------------------------------------------------
+
+    def write(self, topic: str, message: Mapping[str, Any], t_s: float) -> None:
+        """Log one message on a topic of `TOPICS` at session time ``t_s`` (s). ``message``
+        may hold numpy arrays and scalars; ``t_s`` is added to it (if it already has a
+        ``t_s``, the two must agree)."""
+        if topic not in TOPICS:
+            raise ValueError(f"unknown log topic {topic!r}; topics: {', '.join(TOPICS)}")
+        if not isinstance(message, Mapping):
+            raise ValueError(f"{topic}: a message is a mapping of fields, got {type(message).__name__}")
+        log_time = self._log_time(topic, t_s)
+        body = jsonable(message, topic)
+        if "t_s" in body and body["t_s"] != float(t_s):
+            raise ValueError(f"{topic}.t_s: the message says {body['t_s']!r} s but was written at t_s={t_s!r} s")
+        body = {"t_s": float(t_s), **body}
+        problem = schema_problem(TOPICS[topic][1], body, topic)
+        if problem:
+            raise ValueError(problem)
+        self._add(topic, log_time, encode(body))
+
+    def write_transform(self, t_s: float, parent: str, child: str, rotation: ArrayLike,
+                        translation_m: ArrayLike) -> None:
+        """Log the pose of frame ``child`` in frame ``parent`` on ``/tf``
+        (foxglove.FrameTransform): ``rotation`` a unit quaternion (w, x, y, z) mapping
+        child-frame vectors into the parent frame, ``translation_m`` the child origin in
+        the parent frame, m."""
+        w, x, y, z = _finite("/tf rotation", rotation, (4,))
+        tx, ty, tz = _finite("/tf translation_m", translation_m, (3,))
+        self.write("/tf", {
+            "timestamp": self._timestamp("/tf", t_s), "parent_frame_id": parent, "child_frame_id": child,
+            "translation": {"x": tx, "y": ty, "z": tz}, "rotation": {"x": x, "y": y, "z": z, "w": w},
+        }, t_s)
+
+    def write_backbone(self, t_s: float, positions_in_base_m: ArrayLike, frame: str = "base", *,
+                       thickness_m: float = DEFAULT_BACKBONE_THICKNESS_M,
+                       color: tuple[float, float, float, float] = DEFAULT_BACKBONE_COLOR) -> None:
+        """Log the rod's backbone, (n, 3) points in ``frame`` in m, on ``/scene/backbone``
+        (foxglove.SceneUpdate): one entity ``"backbone"`` holding one LINE_STRIP drawn
+        ``thickness_m`` wide, replacing the previous one."""
+        points = _finite("/scene/backbone positions_in_base_m", positions_in_base_m, (None, 3))
+        stamp = self._timestamp("/scene/backbone", t_s)
+        r, g, b, a = color
+        line = {
+            "type": LINE_STRIP,
+            "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0},
+                     "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
+            "thickness": thickness_m, "scale_invariant": False,
+            "points": [{"x": px, "y": py, "z": pz} for px, py, pz in points],
+            "color": {"r": r, "g": g, "b": b, "a": a}, "colors": [], "indices": [],
+        }
+        entity = {"timestamp": stamp, "frame_id": frame, "id": "backbone", "lifetime": {"sec": 0, "nsec": 0},
+                  "frame_locked": True, "metadata": [], "arrows": [], "cubes": [], "spheres": [],
+                  "cylinders": [], "lines": [line], "triangles": [], "texts": [], "models": []}
+        self.write("/scene/backbone", {"deletions": [], "entities": [entity]}, t_s)
+
+    def flush(self) -> None:
+        """Close the open chunk and hand everything written so far to the operating system."""
+        self._check_open()
+        self._writer.flush()
+        self._last_flush = time.monotonic()
+
+    def close(self) -> None:
+        """Finish the file (summary, footer) and close it; closing twice is harmless."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._writer.finish()
+        finally:
+            self._stream.close()
+
+    def __enter__(self) -> LogWriter:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        # Finish the file even when the session failed: the log is most wanted then.
+        self.close()
+
+    # --- internals ----------------------------------------------------------------------
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ValueError(f"{self.path}: the log is closed")
+
+    def _log_time(self, topic: str, t_s: float) -> int:
+        if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.number)) or not np.isfinite(t_s):
+            raise ValueError(f"{topic}: t_s must be a finite number of seconds, got {t_s!r}")
+        log_time = self.start_time_ns + round(float(t_s) * _NS_PER_S)
+        if log_time < 0:
+            raise ValueError(f"{topic}: t_s={t_s!r} s falls before the Unix epoch")
+        return log_time
+
+    def _timestamp(self, topic: str, t_s: float) -> dict[str, int]:
+        sec, nsec = divmod(self._log_time(topic, t_s), _NS_PER_S)
+        return {"sec": sec, "nsec": nsec}
+
+    def _add(self, topic: str, log_time: int, data: bytes) -> None:
+        self._check_open()
+        channel = self._channels.get(topic)
+        if channel is None:
+            schema_name, schema = TOPICS[topic]
+            schema_id = self._writer.register_schema(schema_name, SCHEMA_ENCODING, encode(schema))
+            channel = self._channels[topic] = self._writer.register_channel(topic, MESSAGE_ENCODING, schema_id)
+            self._sequence[channel] = 0
+        sequence = self._sequence[channel]
+        self._sequence[channel] = (sequence + 1) & 0xFFFFFFFF
+        self._writer.add_message(channel, log_time=log_time, data=data, publish_time=log_time, sequence=sequence)
+        if time.monotonic() - self._last_flush >= self.flush_interval_s:
+            self.flush()
+
+
+def _checked_metadata(metadata: Mapping[str, Mapping[str, str]]) -> dict[str, dict[str, str]]:
+    records: dict[str, dict[str, str]] = {}
+    for name, values in metadata.items():
+        if not isinstance(name, str) or not isinstance(values, Mapping):
+            raise ValueError(f"metadata: expected {{name: {{key: value}}}} of strings, got {name!r}: {values!r}")
+        if name == LOG_METADATA_NAME:
+            raise ValueError(f"metadata: the name {LOG_METADATA_NAME!r} is reserved for the log format")
+        for key, value in values.items():
+            if not isinstance(key, str) or not isinstance(value, str):
+                raise ValueError(f"metadata {name}.{key}: keys and values must be strings, got {value!r}")
+        records[name] = dict(values)
+    return records
+
+
+def _finite(what: str, value: ArrayLike, shape: tuple[int | None, ...]) -> list[Any]:
+    array = np.asarray(value, dtype=float)
+    if array.ndim != len(shape) or any(size is not None and size != actual for size, actual in zip(shape, array.shape)):
+        expected = str(tuple("n" if size is None else size for size in shape)).replace("'", "")
+        raise ValueError(f"{what}: expected shape {expected}, got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{what}: not finite")
+    return array.tolist()

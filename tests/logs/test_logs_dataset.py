@@ -1,0 +1,142 @@
+"""dataset_from_log: a log's samples mean what the same rows mean in CSV; the analysis
+commands' loaders accept logs and their embedded profiles."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import pytest
+from log_examples import EXAMPLES
+
+from hydrojet_bench.commands.common import load_steps
+from hydrojet_bench.data import Dataset, SampleFlag, load_dataset, read_csv, saturation_flags, write_csv
+from hydrojet_bench.errors import UserError
+from hydrojet_bench.geometry import quat_normalize
+from hydrojet_bench.logs import LogWriter, dataset_from_log, read_log
+from hydrojet_bench.profile import PROFILES_DIR, load_profile
+
+SIM = load_profile("sim")
+SIM_METADATA = {"bench": {"profile_name": "sim", "profile_toml": (PROFILES_DIR / "sim.toml").read_text()}}
+ARRAYS = ("time_s", "jet_forces_n", "base_orientation", "tip_orientation", "base_position_m", "tip_position_m",
+          "sweep", "step", "flags")
+
+
+def recorded_rows(rows: int = 60, seed: int = 3) -> Dataset:
+    """Calibration rows then two sweeps, with positions; one row over the jet limit."""
+    rng = np.random.default_rng(seed)
+    forces = np.repeat(rng.uniform(0.0, 0.12, (rows // 5, 3)), 5, axis=0)
+    forces[7, 1] = 0.2  # above sim's 0.15 N: SATURATED, recomputed from the profile on reading
+    sweep = np.repeat([-1, 0, 1], rows // 3)
+    return Dataset(time_s=np.arange(rows) * 0.025, jet_forces_n=forces,
+                   base_orientation=quat_normalize(rng.normal(size=(rows, 4))),
+                   tip_orientation=quat_normalize(rng.normal(size=(rows, 4))),
+                   base_position_m=rng.normal(0.0, 0.1, (rows, 3)), tip_position_m=rng.normal(0.0, 0.1, (rows, 3)),
+                   sweep=sweep, step=np.arange(rows) // 5, flags=saturation_flags(forces, SIM), profile=SIM,
+                   source="hand-made")
+
+
+def sample(dataset: Dataset, i: int, source: str = "em") -> dict:
+    has_positions = source == "em"
+    return {"source": source, "jet_forces_n": dataset.jet_forces_n[i], "sweep": dataset.sweep[i],
+            "step": dataset.step[i], "base_orientation": dataset.base_orientation[i],
+            "tip_orientation": dataset.tip_orientation[i],
+            "base_position_m": dataset.base_position_m[i] if has_positions else None,
+            "tip_position_m": dataset.tip_position_m[i] if has_positions else None}
+
+
+def write_session(path: Path, dataset: Dataset, metadata=SIM_METADATA, imu: bool = True) -> Path:
+    """The rows as the bench logs them: EM samples among IMU samples and other topics."""
+    with LogWriter(path, metadata=metadata) as log:
+        for i, t_s in enumerate(dataset.time_s):
+            log.write("/em/frame", EXAMPLES["/em/frame"], t_s=t_s)
+            log.write("/bench/sample", sample(dataset, i), t_s=t_s)
+            if imu:
+                log.write("/bench/sample", sample(dataset, i, "imu"), t_s=t_s)
+    return path
+
+
+def assert_same(left: Dataset, right: Dataset) -> None:
+    for name in ARRAYS:
+        assert np.array_equal(getattr(left, name), getattr(right, name)), name
+
+
+def test_log_samples_equal_the_same_rows_read_from_csv(tmp_path: Path) -> None:
+    rows = recorded_rows()
+    write_csv(rows, tmp_path / "rows.csv")
+    from_csv = read_csv(tmp_path / "rows.csv", SIM)
+    from_log = dataset_from_log(write_session(tmp_path / "run.mcap", rows), SIM)
+    assert_same(from_log, from_csv)  # exactly: both formats carry floats at full precision
+    assert from_log.flags[7] == SampleFlag.SATURATED and np.count_nonzero(from_log.flags) == 1
+    assert from_log.source == str(tmp_path / "run.mcap")
+
+    imu = dataset_from_log(tmp_path / "run.mcap", SIM, source="imu")
+    assert imu.base_position_m is None and imu.tip_position_m is None
+    assert np.array_equal(imu.tip_orientation, from_csv.tip_orientation)
+
+
+def test_the_embedded_profile_is_used_unless_one_is_given(tmp_path: Path) -> None:
+    path = write_session(tmp_path / "run.mcap", recorded_rows(), imu=False)
+    embedded = dataset_from_log(path).profile
+    for field in ("name", "gravity_in_tracker_m_s2", "base_orientation_in_tracker", "base_sensor", "tip_sensor",
+                  "rod", "capsule", "jets", "max_jet_force_n"):
+        assert getattr(embedded, field) == getattr(SIM, field), field
+    assert dataset_from_log(path, "hydrojet-v1").profile.name == "hydrojet-v1"
+    # The analysis commands' loaders: load_dataset, and load_steps without --profile.
+    assert load_dataset(path, None).profile.name == "sim"
+    profile, steps = load_steps(argparse.Namespace(data=path, profile=None))
+    assert profile.name == "sim" and len(steps) == 60 // 5
+    csv = tmp_path / "rows.csv"
+    write_csv(recorded_rows(), csv)
+    assert load_steps(argparse.Namespace(data=csv, profile=None))[0].name == "sim"  # CSV keeps its default
+
+
+def test_a_truncated_log_gives_the_samples_before_the_cut(tmp_path: Path) -> None:
+    path = tmp_path / "run.mcap"
+    rows = recorded_rows()
+    log = LogWriter(path, metadata=SIM_METADATA, flush_interval_s=1e6)
+    for i in range(40):
+        log.write("/bench/sample", sample(rows, i), t_s=rows.time_s[i])
+    log.flush()
+    log.write("/bench/sample", sample(rows, 40), t_s=rows.time_s[40])  # never flushed: lost
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes())
+    log.close()
+    assert read_log(cut).truncated
+    assert_same(dataset_from_log(cut), rows.select(np.arange(40)))
+
+
+def test_log_problems_name_the_file(tmp_path: Path) -> None:
+    rows = recorded_rows()
+    no_profile = write_session(tmp_path / "bare.mcap", rows, metadata={}, imu=False)
+    with pytest.raises(UserError, match="bare.mcap: the log embeds no rig profile"):
+        dataset_from_log(no_profile)
+    with pytest.raises(UserError, match="bare.mcap: no /bench/sample samples from source 'imu': it has samples "
+                                        "from em only"):
+        dataset_from_log(no_profile, SIM, source="imu")
+    broken = write_session(tmp_path / "broken.mcap", rows, metadata={"bench": {"profile_toml": "[rod\n"}}, imu=False)
+    with pytest.raises(UserError, match="broken.mcap, metadata bench.profile_toml: not valid TOML"):
+        dataset_from_log(broken)
+    wrong = write_session(tmp_path / "wrong.mcap", rows,
+                          metadata={"bench": {"profile_toml": "[rod]\nlength_m = -1.0\n"}}, imu=False)
+    with pytest.raises(UserError, match="wrong.mcap, metadata bench.profile_toml: gravity.in_tracker_m_s2 is required"):
+        dataset_from_log(wrong)
+
+    with LogWriter(tmp_path / "mixed.mcap") as log:
+        log.write("/bench/sample", sample(rows, 0), t_s=0.0)
+        log.write("/bench/sample", {**sample(rows, 1), "tip_position_m": None}, t_s=0.1)
+    with pytest.raises(UserError, match=r"mixed.mcap, message at t_s=0.1 s: /bench/sample.tip_position_m is null"):
+        dataset_from_log(tmp_path / "mixed.mcap", SIM)
+    with LogWriter(tmp_path / "backwards.mcap") as log:
+        log.write("/bench/sample", sample(rows, 0), t_s=1.0)
+        log.write("/bench/sample", sample(rows, 1), t_s=0.5)
+    with pytest.raises(UserError, match="backwards.mcap: /bench/sample .em.: Dataset.time_s row 1: time goes back"):
+        dataset_from_log(tmp_path / "backwards.mcap", SIM)
+    with LogWriter(tmp_path / "pulling.mcap") as log:
+        log.write("/bench/sample", {**sample(rows, 0), "jet_forces_n": [0.0, -0.01, 0.0]}, t_s=0.0)
+    with pytest.raises(UserError, match="pulling.mcap, message at t_s=0.0 s: .*jet forces must be >= 0 N"):
+        dataset_from_log(tmp_path / "pulling.mcap", SIM)
+    (tmp_path / "notes.mcap").write_text("t,q1\n")
+    with pytest.raises(UserError, match="notes.mcap: not an MCAP file"):
+        load_dataset(tmp_path / "notes.mcap", None)

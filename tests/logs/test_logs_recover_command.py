@@ -1,0 +1,36 @@
+"""`hydrojet-bench recover`: what it writes and what it says."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from log_examples import cut_inside_chunk, events_log
+
+from hydrojet_bench.cli import main
+from hydrojet_bench.logs import read_log
+
+
+def test_recover_writes_beside_the_log_and_reports_what_it_kept(tmp_path: Path, capsys) -> None:
+    full = events_log(tmp_path / "full.mcap", chunks=3)
+    session = cut_inside_chunk(full, 1, tmp_path / "session.mcap")
+    kept = read_log(session).messages
+    assert len(kept) == 4
+
+    assert main(["recover", str(session)]) == 0
+    out = capsys.readouterr().out
+    assert f"{session} was truncated" in out
+    assert f"wrote {tmp_path / 'session.recovered.mcap'}: 4 messages, t = 0.000 s to 0.300 s (0.300 s)" in out
+    assert read_log(tmp_path / "session.recovered.mcap").messages == kept
+
+    assert main(["recover", str(full), "-o", str(tmp_path / "copy.mcap")]) == 0
+    out = capsys.readouterr().out
+    assert f"{full} was complete" in out and "12 messages, t = 0.000 s to 2.300 s" in out
+
+
+def test_recover_refuses_what_is_not_a_log(tmp_path: Path, capsys) -> None:
+    notes = tmp_path / "notes.mcap"
+    notes.write_text("not a log\n")
+    assert main(["recover", str(notes)]) == 2
+    error = " ".join(capsys.readouterr().err.split())  # the CLI's console wraps long lines
+    assert "notes.mcap: not an MCAP file" in error
+    assert not (tmp_path / "notes.recovered.mcap").exists()
