@@ -228,5 +228,48 @@ def paper_protocol(max_force_n: float = DEFAULT_MAX_FORCE_N, seed: int = 0,
             + validation_sweeps(max_force_n, settle_s=settle_s))
 
 
+def imu_versus_em_plan(max_force_n: float = DEFAULT_MAX_FORCE_N, static_poses: int = 8, hold_s: float = 20.0,
+                       ramp_steps: int = 40, ramp_step_s: float = 0.5, seed: int = 0) -> Plan:
+    """For comparing IMU and EM orientations: ``static_poses`` random poses held
+    ``hold_s`` each (static accuracy, and drift within a hold), labelled sweep -1 like
+    calibration poses, then one slow ramp per jet, 0 -> max -> 0 in ``2 ramp_steps`` short
+    steps of ``ramp_step_s`` (dynamic agreement while the tip keeps moving), sweeps 0..2."""
+    poses = calibration_plan(static_poses, max_force_n, seed, hold_s)
+    ramps = validation_sweeps(max_force_n, steps_up=ramp_steps, repetitions=1, settle_s=ramp_step_s)
+    return poses + ramps
+
+
+def hold_plan(jet_forces_n: tuple[float, float, float] = (0.0, 0.0, 0.0), duration_s: float = 60.0) -> Plan:
+    """One command held for ``duration_s`` (a rest recording, sensor warm-up, a check)."""
+    return Plan((PlanStep(jet_forces_n, 0, 0, duration_s),))
+
+
+def plan_from_rows(rows: list[dict[str, object]], source: str, default_settle_s: float = DEFAULT_SETTLE_S) -> Plan:
+    """A plan from table rows with keys q1, q2, q3 (N), and optionally settle_s (s), sweep
+    and step; ``source`` names the file in errors ("plan.csv, row 3: ...")."""
+    steps = []
+    counters: dict[int, int] = {}
+    for number, row in enumerate(rows, start=1):
+        unknown = sorted(set(row) - {"q1", "q2", "q3", "settle_s", "sweep", "step"})
+        if unknown:
+            raise ValueError(f"{source}, row {number}: unknown column {unknown[0]!r}; a plan takes q1, q2, q3, "
+                             "settle_s, sweep, step")
+        missing = [key for key in ("q1", "q2", "q3") if key not in row]
+        if missing:
+            raise ValueError(f"{source}, row {number}: missing {', '.join(missing)} (jet forces, N)")
+        try:
+            sweep = int(row.get("sweep", 0))  # type: ignore[arg-type]
+            step = int(row.get("step", counters.get(sweep, 0)))  # type: ignore[arg-type]
+            counters[sweep] = step + 1
+            steps.append(PlanStep(tuple(float(row[key]) for key in ("q1", "q2", "q3")),  # type: ignore[arg-type]
+                                  sweep, step, float(row.get("settle_s", default_settle_s))))  # type: ignore[arg-type]
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"{source}, row {number}: {error}") from None
+    if not steps:
+        raise ValueError(f"{source}: the plan has no steps")
+    return Plan(tuple(steps))
+
+
 __all__ = ["CALIBRATION_SWEEP", "DEFAULT_MAX_FORCE_N", "DEFAULT_SETTLE_S", "PAPER_CALIBRATION_POSES", "Plan",
-           "PlanStep", "calibration_plan", "paper_protocol", "validation_sweeps"]
+           "PlanStep", "calibration_plan", "hold_plan", "imu_versus_em_plan", "paper_protocol", "plan_from_rows",
+           "validation_sweeps"]

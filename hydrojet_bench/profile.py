@@ -320,12 +320,15 @@ def resolve_profile_path(spec: str | Path) -> Path:
                     f"shipped profile ({known})")
 
 
-class _Reader:
-    """Typed access to one profile document, raising `UserError` naming file and key."""
+class TableReader:
+    """Typed access to one profile document, raising `UserError` naming file and key.
+    ``table_keys``: the tables this reader owns and the keys each takes."""
 
-    def __init__(self, source: str, document: Mapping[str, Any]) -> None:
+    def __init__(self, source: str, document: Mapping[str, Any],
+                 table_keys: Mapping[str, tuple[str, ...]] = _TABLE_KEYS) -> None:
         self.source = source
         self.document = document
+        self.table_keys = table_keys
 
     def fail(self, key: str, message: str) -> UserError:
         return UserError(f"{self.source}: {key} {message}")
@@ -334,7 +337,7 @@ class _Reader:
         value = self.document.get(name, {})
         if not isinstance(value, Mapping):
             raise self.fail(name, f"must be a table ([{name}]), got {_describe(value)}")
-        allowed = _TABLE_KEYS[name]
+        allowed = self.table_keys[name]
         for key in value:
             if key not in allowed:
                 raise self.fail(f"{name}.{key}", f"is not a known key; [{name}] takes {', '.join(allowed)}")
@@ -387,6 +390,45 @@ class _Reader:
                             f"{_QUATERNION_NORM_TOLERANCE:g} of 1), got norm {norm:.6g}")
         return tuple(v / norm for v in q)  # type: ignore[return-value]
 
+    def integer(self, table: str, key: str, *, minimum: int | None = None,
+                maximum: int | None = None) -> int | None:
+        values = self.table(table)
+        if key not in values:
+            return None
+        value = values[key]
+        dotted = f"{table}.{key}"
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(dotted, f"must be an integer, got {_describe(value)}")
+        if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
+            bounds = f"{minimum if minimum is not None else '-inf'}..{maximum if maximum is not None else 'inf'}"
+            raise self.fail(dotted, f"must be in {bounds}, got {value!r}")
+        return value
+
+    def boolean(self, table: str, key: str) -> bool | None:
+        values = self.table(table)
+        if key not in values:
+            return None
+        if not isinstance(values[key], bool):
+            raise self.fail(f"{table}.{key}", f"must be true or false, got {_describe(values[key])}")
+        return values[key]
+
+    def string(self, table: str, key: str) -> str | None:
+        values = self.table(table)
+        if key not in values:
+            return None
+        if not isinstance(values[key], str):
+            raise self.fail(f"{table}.{key}", f"must be a string, got {_describe(values[key])}")
+        return values[key]
+
+    def strings(self, table: str, key: str) -> tuple[str, ...] | None:
+        values = self.table(table)
+        if key not in values:
+            return None
+        value = values[key]
+        if not isinstance(value, list) or not all(isinstance(item, str) for item in value):
+            raise self.fail(f"{table}.{key}", f"must be a list of strings, got {_describe(value)}")
+        return tuple(value)
+
     def text(self, key: str) -> str | None:
         if key not in self.document:
             return None
@@ -426,7 +468,7 @@ def profile_from_mapping(document: Mapping[str, Any], *, source: str = "<profile
                          path: Path | None = None) -> RigProfile:
     """Build a `RigProfile` from an already parsed TOML document (``source`` names it in
     errors)."""
-    reader = _Reader(source, document)
+    reader = TableReader(source, document)
     extra: dict[str, Any] = {}
     for key, value in document.items():
         if key in _TABLE_KEYS or key in _TOP_LEVEL_KEYS:
@@ -484,7 +526,7 @@ def profile_from_mapping(document: Mapping[str, Any], *, source: str = "<profile
     )
 
 
-def _max_force(reader: _Reader) -> Vector3:
+def _max_force(reader: TableReader) -> Vector3:
     values = reader.table("jets")
     if "max_force_n" not in values:
         return (DEFAULT_MAX_JET_FORCE_N,) * 3

@@ -10,6 +10,7 @@ with ``--static``, a plant whose base sits at the origin and tip 70 mm below it.
 from __future__ import annotations
 
 import argparse
+import time
 
 from rich.console import Console
 
@@ -36,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"--watchdog-ms must be positive, got {args.watchdog_ms}")
         from drivers.valve.serve import serve
 
-        serve(plant, args.watchdog_ms / 1000.0,
+        serve(_ReportingPlant(plant), args.watchdog_ms / 1000.0,
               announce=lambda path: print(f"valve controller emulator on {path}", flush=True))
     else:
         from drivers.aurora.serve import serve_pty
@@ -56,3 +57,22 @@ def _plant(args: argparse.Namespace):
     from ..twin.profile_table import twin_config
 
     return DigitalTwin(twin_config(load_profile(args.profile)))
+
+
+class _ReportingPlant:
+    """Prints every valve change, so a user (or a test) sees the emulator close the valves
+    when the host falls silent: ``valves 500 0 0 at monotonic 1234.567 s``. The time is
+    the system's monotonic clock, comparable across processes on this machine."""
+
+    def __init__(self, plant) -> None:
+        self._plant = plant
+        self.gravity_in_world_m_s2 = plant.gravity_in_world_m_s2
+        self.magnetic_field_in_world_ut = plant.magnetic_field_in_world_ut
+
+    def sensor_truth(self, sensor: str, t_s: float):
+        return self._plant.sensor_truth(sensor, t_s)
+
+    def apply_valve_duties(self, duties_permille, t_s: float) -> None:
+        print(f"valves {' '.join(str(int(d)) for d in duties_permille)} at monotonic {time.monotonic():.3f} s",
+              flush=True)
+        self._plant.apply_valve_duties(duties_permille, t_s)

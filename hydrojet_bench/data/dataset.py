@@ -19,7 +19,7 @@ load, and analysis picks its rows with `valid_mask` / `valid_rows`.
 from __future__ import annotations
 
 import enum
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -246,6 +246,23 @@ class Dataset:
                        tip_orientation=self.tip_orientation[index],
                        base_position_m=pick(self.base_position_m), tip_position_m=pick(self.tip_position_m),
                        sweep=self.sweep[index], step=self.step[index], flags=self.flags[index])
+
+    @classmethod
+    def concatenate(cls, parts: Sequence[Dataset]) -> Dataset:
+        """The rows of ``parts`` (same profile, in time order) as one dataset; positions
+        are kept only if every part has them."""
+        if not parts:
+            raise ValueError("concatenate needs at least one dataset")
+        with_positions = all(part.has_positions for part in parts)
+
+        def join(name: str) -> np.ndarray:
+            return np.concatenate([getattr(part, name) for part in parts])
+
+        return replace(parts[0], time_s=join("time_s"), jet_forces_n=join("jet_forces_n"),
+                       base_orientation=join("base_orientation"), tip_orientation=join("tip_orientation"),
+                       base_position_m=join("base_position_m") if with_positions else None,
+                       tip_position_m=join("tip_position_m") if with_positions else None,
+                       sweep=join("sweep"), step=join("step"), flags=join("flags"))
 
     def calibration_rows(self) -> Dataset:
         """Rows with sweep -1 (calibration or unlabelled)."""

@@ -1,0 +1,69 @@
+"""Which plan a session plays: a built-in by name, or a plan file.
+
+Built-ins: ``paper`` (40 calibration poses + the nine sweeps, 229 steps), ``calibration``
+(the 40 poses), ``sweeps`` (the nine sweeps), ``imu-vs-em`` (static poses and slow
+ramps), ``hold`` or ``hold:SECONDS`` (jets off, held).
+
+Plan files list force steps, one per row, with columns (CSV header) or keys (TOML
+``[[step]]`` tables) ``q1, q2, q3`` (N) and optionally ``settle_s``, ``sweep`` and
+``step``; rows of sweep -1 are calibration poses. A TOML file may set a top-level
+``settle_s`` default::
+
+    settle_s = 5.0
+    [[step]]
+    q1 = 0.05
+    q2 = 0.0
+    q3 = 0.0
+"""
+
+from __future__ import annotations
+
+import csv
+import tomllib
+from pathlib import Path
+
+from ..errors import UserError
+from ..plans import (DEFAULT_SETTLE_S, Plan, calibration_plan, hold_plan, imu_versus_em_plan, paper_protocol,
+                     plan_from_rows, validation_sweeps)
+
+BUILT_IN = ("paper", "calibration", "sweeps", "imu-vs-em", "hold")
+
+
+def choose_plan(spec: str, settle_s: float = DEFAULT_SETTLE_S, seed: int = 0) -> Plan:
+    """The plan ``spec`` names; every problem is a `UserError` naming the file and row."""
+    name, _, argument = spec.partition(":")
+    if name == "paper":
+        return paper_protocol(seed=seed, settle_s=settle_s)
+    if name == "calibration":
+        return calibration_plan(seed=seed, settle_s=settle_s)
+    if name == "sweeps":
+        return validation_sweeps(settle_s=settle_s)
+    if name == "imu-vs-em":
+        return imu_versus_em_plan(seed=seed)
+    if name == "hold":
+        try:
+            return hold_plan(duration_s=float(argument) if argument else 60.0)
+        except ValueError as error:
+            raise UserError(f"plan {spec!r}: hold:SECONDS takes a positive number of seconds ({error})") from None
+    path = Path(spec)
+    if not path.is_file():
+        raise UserError(f"plan {spec!r}: neither a built-in plan ({', '.join(BUILT_IN)}) nor an existing file")
+    try:
+        if path.suffix.lower() == ".csv":
+            with path.open(newline="", encoding="utf-8-sig") as handle:
+                rows = [{key.strip(): value for key, value in row.items() if key is not None}
+                        for row in csv.DictReader(line for line in handle if not line.startswith("#"))]
+            return plan_from_rows(rows, str(path), settle_s)
+        if path.suffix.lower() == ".toml":
+            with path.open("rb") as handle:
+                document = tomllib.load(handle)
+            default = document.get("settle_s", settle_s)
+            steps = document.get("step")
+            if not isinstance(steps, list) or not all(isinstance(row, dict) for row in steps):
+                raise ValueError(f"{path}: expected [[step]] tables with q1, q2, q3")
+            return plan_from_rows(steps, str(path), default)
+    except (ValueError, tomllib.TOMLDecodeError) as error:
+        raise UserError(str(error) if str(path) in str(error) else f"{path}: {error}") from None
+    except OSError as error:
+        raise UserError(f"{path}: cannot read: {error.strerror or error}") from None
+    raise UserError(f"plan file {path}: expected a .csv or .toml file")

@@ -1,0 +1,136 @@
+"""Re-run a session's estimation offline from its log.
+
+A log holds every settled step (``/bench/step``: the averaged sensor poses, as
+`Dataset.quasistatic_steps` rows), the parameters the live estimator used and when
+(``/bench/parameters``: the starting ones, then the calibrated ones) and the live
+predictions (``/model/prediction``). `replay` feeds the steps through `StepEstimation` as
+the session did, switching parameters at the same points, so with the live model and
+settings it reproduces the live estimates exactly; with another model, effects or
+parameters it answers "what would this model have done on that session".
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..data.dataset import Dataset
+from ..errors import ConvergenceError, UserError
+from ..estimation.online import OnlineSettings
+from ..logs import read_log
+from ..logs.dataset import rig_profile_of_log
+from ..models.shooting import ShootingModel
+from ..params import ModelParameters, with_parameters
+from ..profile import RigProfile
+from .live_estimation import StepEstimate, StepEstimation
+
+STEP_TOPIC = "/bench/step"
+PARAMETERS_TOPIC = "/bench/parameters"
+PREDICTION_TOPIC = "/model/prediction"
+
+
+@dataclass(frozen=True)
+class ParameterRecord:
+    t_s: float
+    values: dict[str, float]
+    calibrated: bool
+
+
+@dataclass(frozen=True)
+class LoggedSession:
+    """What replay needs from a log. steps: the settled steps in order; plan_index: each
+    step's index in the plan; live_errors: (plan index, method) -> orientation error, deg,
+    as the live session computed it."""
+
+    path: Path
+    profile: RigProfile
+    model_name: str
+    effects: tuple[str, ...]
+    steps: Dataset
+    plan_index: np.ndarray
+    step_times_s: np.ndarray
+    parameters: tuple[ParameterRecord, ...]
+    live_errors: dict[tuple[int, str], float]
+    truncated: bool
+
+
+def read_session(path: Path, profile: RigProfile | str | Path | None = None) -> LoggedSession:
+    """The settled steps, parameter timeline and live predictions of a session log."""
+    contents = read_log(path, topics=[STEP_TOPIC, PARAMETERS_TOPIC, PREDICTION_TOPIC])
+    rig = rig_profile_of_log(path, profile, contents.metadata)
+    records = contents.on(STEP_TOPIC)
+    if not records:
+        raise UserError(f"{path}: no settled steps ({STEP_TOPIC}) in this log; was it written by `hydrojet-bench run`?")
+    data = [record.data for record in records]
+    with_positions = all(row.get("base_position_m") is not None for row in data)
+
+    def column(key: str) -> np.ndarray:
+        return np.array([row[key] for row in data], dtype=float)
+
+    try:
+        steps = Dataset(time_s=column("time_s"), jet_forces_n=column("jet_forces_n"),
+                        base_orientation=column("base_orientation"), tip_orientation=column("tip_orientation"),
+                        base_position_m=column("base_position_m") if with_positions else None,
+                        tip_position_m=column("tip_position_m") if with_positions else None,
+                        sweep=np.array([row["sweep"] for row in data]), step=np.array([row["step"] for row in data]),
+                        profile=rig, source=str(path))
+    except (KeyError, ValueError) as error:
+        raise UserError(f"{path}: {STEP_TOPIC} messages are not complete settled steps ({error})") from None
+    bench = contents.metadata.get("bench", {})
+    parameters = tuple(ParameterRecord(message.t_s, dict(message.data["parameters"]), bool(message.data["calibrated"]))
+                       for message in contents.on(PARAMETERS_TOPIC))
+    live = {(int(m.data["index"]), str(m.data.get("method", "ref"))): float(m.data["orientation_error_deg"])
+            for m in contents.on(PREDICTION_TOPIC)}
+    return LoggedSession(Path(path), rig, bench.get("model", "cosserat"), tuple(json.loads(bench.get("effects", "[]"))),
+                         steps, np.array([row["index"] for row in data]), np.array([r.t_s for r in records]),
+                         parameters, live, contents.truncated)
+
+
+def replay(session: LoggedSession, model: ShootingModel, online: OnlineSettings | None,
+           params: ModelParameters | None = None) -> list[StepEstimate | None]:
+    """Estimates for every settled step (None where the model did not converge, as live).
+
+    params: fixed parameters for every step; None follows the log's parameter timeline
+    (a fresh estimator whenever the live one was restarted with new parameters)."""
+    base = session.profile.model_parameters()
+    estimates: list[StepEstimate | None] = []
+    estimation: StepEstimation | None = None
+    current: ParameterRecord | None = None
+    for row in range(len(session.steps)):
+        if params is None:
+            record = _record_at(session, session.step_times_s[row])
+            if record is not current:
+                current, estimation = record, None
+        if estimation is None:
+            row_params = params if params is not None else with_parameters(base, current.values)
+            estimation = StepEstimation(model, row_params, online)
+        try:
+            estimates.append(estimation.update(session.steps.select([row])))
+        except ConvergenceError:
+            estimates.append(None)
+    return estimates
+
+
+def _record_at(session: LoggedSession, t_s: float) -> ParameterRecord:
+    earlier = [record for record in session.parameters if record.t_s <= t_s]
+    if not earlier:
+        raise UserError(f"{session.path}: no {PARAMETERS_TOPIC} record before the step at {t_s:.1f} s; "
+                        "give --params")
+    return earlier[-1]
+
+
+def live_difference_deg(session: LoggedSession, estimates: list[StepEstimate | None]) -> float | None:
+    """Largest |replayed - live| orientation error over every step and method, deg (None
+    if the log holds no live predictions to compare with)."""
+    differences = []
+    for index, estimate in zip(session.plan_index, estimates):
+        if estimate is None:
+            continue
+        for prediction in (estimate.ref, estimate.online):
+            if prediction is not None and (int(index), prediction.method) in session.live_errors:
+                differences.append(abs(prediction.orientation_error_deg
+                                       - session.live_errors[int(index), prediction.method]))
+    return max(differences) if differences else None

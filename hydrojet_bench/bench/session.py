@@ -1,0 +1,484 @@
+"""One bench session: play a plan on the rig, estimate live, record everything.
+
+Tasks on one event loop: the EM stream and the IMU stream (each samples at its rate in
+session time, logs raw data and feeds the step recorders), the valve driver's own reader
+and heartbeat, and the plan task. The plan task commands each step, holds it for its
+settle time, averages the end of the step, and then:
+
+* on calibration poses (sweep -1): collects them; when the calibration poses end, it
+  calibrates the model on them (paper sec. V-B) in a worker thread while the streams go on;
+* on every step: predicts it with the calibrated constant disturbance ("ref") and, with
+  online estimation on, corrects w_d|m from the measurement (eq. 4).
+
+Exit paths: the valve driver sends ALL_OFF when its context exits, whatever the reason
+(plan done, exception, cancellation by SIGINT/SIGTERM); the firmware's watchdog covers a
+host that dies without exiting. The log is finished on every path but a hard kill, after
+which `hydrojet-bench recover` salvages it up to its last flushed chunk.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from drivers.aurora.client import AuroraTracker
+from drivers.aurora.errors import AuroraError
+from drivers.imu import AsyncIcm20948, Icm20948, ImuError, ImuPairFusion
+from drivers.transport.base import TransportError
+from drivers.valve.client import ValveController, ValveError
+
+from .. import __version__
+from ..data.dataset import Dataset
+from ..errors import ConvergenceError, UserError
+from ..estimation.calibration import CalibrationResult
+from ..analysis.compare import calibrate_dataset
+from ..logs import LogWriter
+from ..models.shooting import ShootingModel
+from ..geometry import quat_from_matrix
+from ..params import PARAMETER_NAMES, ModelParameters, get_parameter
+from ..plans import CALIBRATION_SWEEP, Plan, PlanStep
+from ..profile import RigProfile
+from .clock import Clock, ScaledClock
+from .live_estimation import StepEstimate, StepEstimation
+from .recorder import StepRecorder
+from .settings import BenchSettings, SIM
+from .simulated_rig import SimulatedDevices, simulated_devices
+
+# Consecutive stream failures after which a device counts as lost and the session stops.
+MAX_CONSECUTIVE_FAILURES = 20
+
+
+class SessionAborted(UserError):
+    """A device failed for good; the session stopped with valves off and its log finished."""
+
+
+@dataclass(frozen=True)
+class SessionRequest:
+    """What to run. params: parameters to start from (calibrated earlier, or the
+    profile's nominal ones); calibrate: fit them on the plan's calibration poses when
+    those end; names: which parameters that calibration fits (effect parameters
+    included)."""
+
+    profile: RigProfile
+    settings: BenchSettings
+    plan: Plan
+    log_path: Path
+    model: ShootingModel
+    effects: tuple[str, ...]
+    params: ModelParameters
+    calibrate: bool = True
+    calibration_names: tuple[str, ...] = PARAMETER_NAMES
+    seed: int | None = None
+    command_line: str = ""
+
+
+@dataclass
+class SessionStatus:
+    """What the live view shows; updated in place by the session."""
+
+    step_count: int
+    phase: str = "starting"
+    step_index: int = -1
+    step: PlanStep | None = None
+    session_time_s: float = 0.0
+    wall_start_s: float = field(default_factory=time.monotonic)
+    remaining_session_s: float = 0.0
+    ref_error_deg: float | None = None
+    online_error_deg: float | None = None
+    disturbance_norm_nm: float | None = None
+    em_frames: int = 0
+    em_missing: int = 0
+    imu_samples: int = 0
+    imu_errors: int = 0
+    valve_commands: int = 0
+    valve_retries: int = 0
+    events: deque = field(default_factory=lambda: deque(maxlen=6))
+
+
+@dataclass(frozen=True)
+class SessionResult:
+    log_path: Path
+    completed_steps: int
+    step_count: int
+    session_time_s: float
+    wall_time_s: float
+    params: ModelParameters
+    calibration: CalibrationResult | None
+    estimates: tuple[StepEstimate, ...]
+    steps: Dataset | None
+
+
+class Session:
+    def __init__(self, request: SessionRequest, clock: Clock | None = None,
+                 on_update: Callable[[SessionStatus], None] | None = None) -> None:
+        self.request = request
+        self.clock = clock or ScaledClock(request.settings.timing.time_scale)
+        self.status = SessionStatus(len(request.plan))
+        self.on_update = on_update or (lambda status: None)
+        profile = request.profile
+        self.em = StepRecorder(profile, with_positions=True, source="em")
+        self.imu = StepRecorder(profile, with_positions=False, source="imu")
+        self.params = request.params
+        self.calibration: CalibrationResult | None = None
+        self.estimation: StepEstimation | None = None
+        self.estimates: list[StepEstimate] = []
+        self.settled_rows: list[Dataset] = []
+        self._calibration_rows: list[Dataset] = []
+        self._log: LogWriter | None = None
+        self._devices: SimulatedDevices | None = None
+        self._stopping = False
+
+    # --- public ---------------------------------------------------------------------
+
+    async def run(self) -> SessionResult:
+        request = self.request
+        started = time.monotonic()
+        metadata = {"bench": {
+            "software_version": __version__,
+            "profile_name": request.profile.name,
+            "profile_toml": request.profile.path.read_text() if request.profile.path else "",
+            "plan_steps": str(len(request.plan)),
+            "model": request.model.name,
+            "effects": json.dumps(list(request.effects)),
+            "command_line": request.command_line,
+            "settings": repr(request.settings),
+        }}
+        completed = 0
+        with LogWriter(request.log_path, metadata=metadata,
+                       flush_interval_s=request.settings.timing.flush_interval_s) as log:
+            self._log = log
+            self._write_parameters()
+            try:
+                completed = await self._run_devices()
+            except asyncio.CancelledError:
+                self.event("warning", "session", "interrupted: valves closed, log finished")
+                raise
+            except Exception as error:
+                self.event("error", "session", f"stopped: {type(error).__name__}: {error}")
+                raise
+        steps = Dataset.concatenate(self.settled_rows) if self.settled_rows else None
+        return SessionResult(request.log_path, completed, len(request.plan), self.clock.now(),
+                             time.monotonic() - started, self.params, self.calibration,
+                             tuple(self.estimates), steps)
+
+    def event(self, level: str, source: str, message: str) -> None:
+        t_s = self.clock.now()
+        self.status.events.append((t_s, level, message))
+        if self._log is not None:
+            self._log.write("/events", {"t_s": t_s, "level": level, "source": source, "message": message}, t_s=t_s)
+
+    # --- devices --------------------------------------------------------------------
+
+    async def _run_devices(self) -> int:
+        request = self.request
+        settings = request.settings
+        async with contextlib.AsyncExitStack() as stack:
+            valves_url, tracker_url, imu_bus = settings.transports.valves, settings.transports.tracker, None
+            if settings.transports.simulated:
+                devices = await stack.enter_async_context(
+                    simulated_devices(request.profile, settings, self.clock, request.seed))
+                self._devices = devices
+                valves_url = devices.valves_url or valves_url
+                tracker_url = devices.tracker_url or tracker_url
+                imu_bus = devices.imu_bus
+                self.event("info", "rig", f"simulated rig: {devices.twin!r}")
+            if imu_bus is None and settings.transports.imu_bus != SIM:
+                import smbus2
+
+                imu_bus = stack.enter_context(smbus2.SMBus(settings.transports.imu_bus))
+            tracker = AuroraTracker(tracker_url, list(settings.tracker.tools), use_tx=settings.tracker.use_tx,
+                                    clock=self.clock.now)
+            await stack.enter_async_context(tracker)
+            self.event("info", "tracker", f"tracking {', '.join(tracker.handles)} ({tracker.version_text.strip()[:40]})")
+            imus = await self._open_imus(imu_bus)
+            valves = ValveController(valves_url, calibrations=settings.valves.calibrations,
+                                     retries=settings.valves.retries,
+                                     reply_timeout_s=settings.valves.reply_timeout_ms / 1000.0,
+                                     heartbeat_interval_s=settings.valves.heartbeat_ms / 1000.0)
+            # Entered last, so it exits first: ALL_OFF before anything else is torn down.
+            await stack.enter_async_context(valves)
+            self.event("info", "valves", "armed")
+            async with asyncio.TaskGroup() as group:
+                streams = [group.create_task(self._em_stream(tracker), name="em-stream")]
+                if imus is not None:
+                    streams.append(group.create_task(self._imu_stream(imus), name="imu-stream"))
+                try:
+                    return await self._play(valves)
+                finally:
+                    # Python 3.11's wait_for can swallow a cancellation that arrives as its
+                    # inner future completes (the IMU reads complete all the time), so the
+                    # streams also stop on this flag.
+                    self._stopping = True
+                    for task in streams:
+                        task.cancel()
+
+    async def _open_imus(self, bus) -> tuple[AsyncIcm20948, AsyncIcm20948, ImuPairFusion] | None:
+        if bus is None:
+            return None
+        imu = self.request.settings.imu
+        lock = threading.Lock()
+        chips = []
+        for address, calibration in ((imu.base_address, imu.base_calibration),
+                                     (imu.tip_address, imu.tip_calibration)):
+            driver = Icm20948(bus, address, clock=self.clock.now, calibration=calibration,
+                              sleep=lambda seconds: time.sleep(seconds / self.clock_scale))
+            chip = AsyncIcm20948(driver, bus_lock=lock)
+            await chip.initialize()
+            if imu.gyro_bias_samples:
+                await chip.estimate_gyro_bias(imu.gyro_bias_samples)  # applied to the driver's calibration
+            chips.append(chip)
+        self.event("info", "imu", f"ICM-20948 at {imu.base_address:#04x} and {imu.tip_address:#04x} ready")
+        return chips[0], chips[1], ImuPairFusion(imu.rate_hz, gain=imu.madgwick_gain,
+                                                 use_magnetometer=imu.use_magnetometer)
+
+    @property
+    def clock_scale(self) -> float:
+        return getattr(self.clock, "time_scale", 1.0)
+
+    # --- streams --------------------------------------------------------------------
+
+    async def _periodic(self, rate_hz: float):
+        """Yield once per period of session time; a stream that falls behind skips the
+        missed ticks rather than bursting to catch up."""
+        period = 1.0 / rate_hz
+        next_tick = self.clock.now()
+        while not self._stopping:
+            next_tick += period
+            now = self.clock.now()
+            if next_tick < now - period:
+                next_tick = now
+            await self.clock.sleep_until(next_tick)
+            yield
+
+    async def _em_stream(self, tracker: AuroraTracker) -> None:
+        log = self._log
+        status = self.status
+        failures = 0
+        missing_before = False
+        async for _ in self._periodic(self.request.settings.tracker.rate_hz):
+            try:
+                frame = await tracker.read_frame()
+                failures = 0
+            except (AuroraError, TransportError, TimeoutError) as error:
+                failures += 1
+                self.event("warning", "tracker", f"frame lost: {error}")
+                if failures >= MAX_CONSECUTIVE_FAILURES:
+                    raise SessionAborted(f"EM tracker lost: {failures} frames failed in a row ({error})") from error
+                continue
+            t_s = self.clock.now()
+            status.em_frames += 1
+            tools = [{
+                "name": pose.name, "handle": pose.handle, "status": pose.status.value,
+                "orientation": pose.orientation, "position_m": None if pose.position_mm is None
+                else [v / 1000.0 for v in pose.position_mm], "rms_error_mm": pose.rms_error_mm,
+            } for pose in frame.poses]
+            log.write("/em/frame", {"t_s": t_s, "frame_number": frame.frame_number,
+                                    "system_status": f"{frame.system_status:#06x}", "tools": tools}, t_s=t_s)
+            try:
+                base, tip = frame["base"], frame["tip"]
+            except KeyError:
+                continue
+            complete = base.has_pose and tip.has_pose and not frame.hardware_failure
+            if not complete:
+                status.em_missing += 1
+                if not missing_before:
+                    self.event("warning", "tracker", f"sensor not tracked: base {base.status.name}, tip {tip.status.name}")
+                missing_before = True
+                continue
+            if missing_before:
+                self.event("info", "tracker", "both sensors tracked again")
+            missing_before = False
+            base_p = np.array(base.position_mm) / 1000.0
+            tip_p = np.array(tip.position_mm) / 1000.0
+            self.em.add(t_s, np.array(base.orientation), np.array(tip.orientation), base_p, tip_p)
+            self._write_sample("em", t_s, base.orientation, tip.orientation, base_p, tip_p)
+
+    async def _imu_stream(self, imus) -> None:
+        base_chip, tip_chip, fusion = imus
+        log = self._log
+        failures = 0
+        async for _ in self._periodic(self.request.settings.imu.rate_hz):
+            try:
+                base = await base_chip.read_sample()
+                tip = await tip_chip.read_sample()
+                failures = 0
+            except ImuError as error:
+                failures += 1
+                self.status.imu_errors += 1
+                self.event("warning", "imu", f"sample lost: {error}")
+                if failures >= MAX_CONSECUTIVE_FAILURES:
+                    raise SessionAborted(f"IMUs lost: {failures} samples failed in a row ({error})") from error
+                continue
+            self.status.imu_samples += 1
+            for name, chip, sample in (("base", base_chip, base), ("tip", tip_chip, tip)):
+                log.write("/imu/raw", {"t_s": sample.t_s, "sensor": name, "address": chip.address,
+                                       "accel_m_s2": sample.accel_m_s2, "gyro_rad_s": sample.gyro_rad_s,
+                                       "mag_ut": sample.mag_ut, "temperature_c": sample.temperature_degc},
+                          t_s=sample.t_s)
+            tip_in_base = fusion.update(base, tip)
+            t_s = tip.t_s
+            base_q, tip_q = fusion.base.quaternion, fusion.tip.quaternion
+            log.write("/imu/orientation", {"t_s": t_s, "base": base_q, "tip": tip_q, "tip_in_base": tip_in_base},
+                      t_s=t_s)
+            self.imu.add(t_s, base_q, tip_q)
+            self._write_sample("imu", t_s, base_q, tip_q, None, None)
+
+    def _write_sample(self, source: str, t_s: float, base_q, tip_q, base_p, tip_p) -> None:
+        step = self.em.step
+        self._log.write("/bench/sample", {
+            "t_s": t_s, "source": source,
+            "jet_forces_n": step.jet_forces_n if step is not None else (0.0, 0.0, 0.0),
+            "sweep": step.sweep if step is not None else CALIBRATION_SWEEP,
+            "step": step.step if step is not None else 0,
+            "base_orientation": base_q, "tip_orientation": tip_q,
+            "base_position_m": base_p, "tip_position_m": tip_p}, t_s=t_s)
+
+    # --- the plan -------------------------------------------------------------------
+
+    async def _play(self, valves: ValveController) -> int:
+        request = self.request
+        status = self.status
+        timing = request.settings.timing
+        remaining = request.plan.duration_s
+        for index, step in enumerate(request.plan):
+            if step.sweep != CALIBRATION_SWEEP:
+                await self._finish_calibration()
+            status.phase = "calibration poses" if step.sweep == CALIBRATION_SWEEP else f"sweep {step.sweep}"
+            status.step_index, status.step = index, step
+            self.em.begin(step)
+            self.imu.begin(step)
+            started = self.clock.now()
+            await self._command(valves, step.jet_forces_n)
+            end = started + step.settle_s
+            await self.clock.sleep_until(end)
+            remaining -= step.settle_s
+            status.remaining_session_s = remaining
+            status.session_time_s = self.clock.now()
+            self._settle(index, step, self.clock.now(), min(timing.window_s, step.settle_s))
+            self.on_update(status)
+        await self._finish_calibration()
+        await self._command(valves, (0.0, 0.0, 0.0))
+        status.phase = "done"
+        self.on_update(status)
+        return len(request.plan)
+
+    async def _command(self, valves: ValveController, forces) -> None:
+        t_s = self.clock.now()
+        self._log.write("/valves/command", {"t_s": t_s, "command": "SET_ALL", "duties_permille": None,
+                                            "jet_forces_n": forces}, t_s=t_s)
+        try:
+            duties = await valves.set_forces_n(forces)
+        except ValveError as error:
+            t_s = self.clock.now()
+            self._log.write("/valves/reply", {"t_s": t_s, "command": "SET_ALL", "ok": False,
+                                              "code": type(error).__name__, "detail": str(error)}, t_s=t_s)
+            raise SessionAborted(f"valve controller refused or did not answer: {error}") from error
+        t_s = self.clock.now()
+        self.status.valve_commands += 1
+        self.status.valve_retries = valves.timeouts
+        self._log.write("/valves/reply", {"t_s": t_s, "command": "SET_ALL", "ok": True, "code": None,
+                                          "detail": f"duties {list(duties)} per mille"}, t_s=t_s)
+
+    def _settle(self, index: int, step: PlanStep, end_s: float, window_s: float) -> None:
+        settled = self.em.settled(end_s, window_s)
+        if settled is None:
+            self.event("warning", "plan", f"step {index}: no EM sample in its last {window_s:g} s; not estimated")
+            return
+        self.settled_rows.append(settled)
+        positions = settled.tip_position_in_base_m()
+        self._log.write("/bench/step", {
+            "t_s": end_s, "index": index, "count": len(self.request.plan), "sweep": step.sweep, "step": step.step,
+            "jet_forces_n": settled.jet_forces_n[0], "samples": self.em.sample_count,
+            "tip_in_base_measured": settled.tip_orientation_in_base()[0],
+            "tip_position_in_base_m": None if positions is None else positions[0],
+            "time_s": float(settled.time_s[0]),
+            "base_orientation": settled.base_orientation[0], "tip_orientation": settled.tip_orientation[0],
+            "base_position_m": None if positions is None else settled.base_position_m[0],
+            "tip_position_m": None if positions is None else settled.tip_position_m[0],
+        }, t_s=end_s)
+        if step.sweep == CALIBRATION_SWEEP and self.request.calibrate:
+            self._calibration_rows.append(settled)
+        self._estimate(index, settled, end_s)
+
+    def _estimate(self, index: int, settled: Dataset, t_s: float) -> None:
+        if self.estimation is None:
+            online = self.request.settings.estimator.online_settings if self.request.settings.estimator.online else None
+            self.estimation = StepEstimation(self.request.model, self.params, online)
+        try:
+            estimate = self.estimation.update(settled)
+        except ConvergenceError as error:
+            self.event("warning", "model", f"step {index}: model did not converge ({error})")
+            return
+        self.estimates.append(estimate)
+        log = self._log
+        for prediction in (estimate.ref, estimate.online):
+            if prediction is None:
+                continue
+            log.write("/model/prediction", {
+                "t_s": t_s, "index": index, "method": prediction.method, "tip_in_base": prediction.tip_in_base,
+                "tip_position_in_base_m": prediction.tip_position_in_base_m, "bend_deg": prediction.bend_deg,
+                "orientation_error_deg": prediction.orientation_error_deg,
+                "position_error_mm": prediction.position_error_mm}, t_s=t_s)
+        best = estimate.best
+        if estimate.online is not None:
+            moment = estimate.disturbance_moment_nm
+            log.write("/estimate/disturbance", {
+                "t_s": t_s, "index": index, "force_n": estimate.disturbance_force_n, "moment_nm": moment,
+                "moment_norm_nm": float(np.linalg.norm(moment)),
+                "orientation_error_deg_before": estimate.error_before_deg,
+                "orientation_error_deg_after": estimate.online.orientation_error_deg,
+                "iterations": estimate.iterations}, t_s=t_s)
+            self.status.disturbance_norm_nm = float(np.linalg.norm(moment))
+            self.status.online_error_deg = estimate.online.orientation_error_deg
+        self.status.ref_error_deg = estimate.ref.orientation_error_deg
+        log.write_transform(t_s, parent="base", child="tip_model",
+                            rotation=quat_from_matrix(best.solution.tip_rotation_in_base),
+                            translation_m=best.solution.tip_position_in_base_m)
+        measured_positions = settled.tip_position_in_base_m()
+        if measured_positions is not None:
+            log.write_transform(t_s, parent="base", child="tip_measured",
+                                rotation=settled.tip_orientation_in_base()[0], translation_m=measured_positions[0])
+        log.write_backbone(t_s, positions_in_base_m=best.solution.positions_in_base_m, frame="base")
+
+    async def _finish_calibration(self) -> None:
+        if not self._calibration_rows or self.calibration is not None:
+            return
+        rows = Dataset.concatenate(self._calibration_rows)
+        self._calibration_rows = []
+        self.status.phase = "calibrating"
+        self.on_update(self.status)
+        request = self.request
+        self.event("info", "calibration", f"calibrating {len(request.calibration_names)} parameters on {len(rows)} poses")
+        try:
+            result = await asyncio.to_thread(calibrate_dataset, request.model, rows, self.params,
+                                             request.calibration_names)
+        except (ConvergenceError, ValueError) as error:
+            self.event("error", "calibration", f"failed, keeping the starting parameters: {error}")
+            return
+        self.calibration = result
+        self.params = result.params
+        self.estimation = None  # restart estimation from the calibrated parameters
+        self.event("info", "calibration", f"RMS orientation error {result.rms_orientation_deg_before:.2f} deg "
+                   f"-> {result.rms_orientation_deg_after:.2f} deg")
+        self._write_parameters()
+
+    def _write_parameters(self) -> None:
+        t_s = self.clock.now()
+        calibration = self.calibration
+        names = list(PARAMETER_NAMES) + [name for name in self.params.effect_values if name not in PARAMETER_NAMES]
+        self._log.write("/bench/parameters", {
+            "t_s": t_s, "model": self.request.model.name, "effects": list(self.request.effects),
+            "parameters": {name: get_parameter(self.params, name) for name in names},
+            "calibrated": calibration is not None,
+            "rms_orientation_deg_before": None if calibration is None else calibration.rms_orientation_deg_before,
+            "rms_orientation_deg_after": None if calibration is None else calibration.rms_orientation_deg_after,
+        }, t_s=t_s)

@@ -1,0 +1,103 @@
+"""The simulated rig: the digital twin behind the byte-level emulators.
+
+One `DigitalTwin` (from the profile's ``[twin]`` table) is the truth for all three
+emulators, seen through `SessionPlant` at *session* time. The valve emulator keeps its
+watchdog on the wall clock (it is the firmware's own safety, see `bench.clock`); the
+Aurora's 40 Hz frame counter and the IMUs' sample instants follow session time.
+
+Per the profile's ``[transports]``: ``"sim"`` registers the emulator as an in-process
+``sim://`` device (no thread; the drivers' full codec path still runs); ``"pty"`` serves it
+on a pseudo-terminal from a thread, so the serial transport runs too. The IMU pair is an
+SMBus-compatible object either way.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+from collections.abc import AsyncIterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from drivers.aurora.emulator import AuroraEmulator
+from drivers.imu.emulator import Icm20948BusEmulator
+from drivers.plant import SensorTruth
+from drivers.transport import PtyServer
+from drivers.transport.sim import serve_sim
+from drivers.valve.emulator import ValveEmulator
+
+from ..profile import RigProfile
+from ..twin import DigitalTwin
+from ..twin.profile_table import twin_config
+from .clock import Clock
+from .settings import PTY, SIM, BenchSettings
+
+_instances = itertools.count()
+
+
+class SessionPlant:
+    """`drivers.plant.Plant` over a twin, stamped with session time whatever clock the
+    emulator calling it runs on."""
+
+    def __init__(self, twin: DigitalTwin, clock: Clock) -> None:
+        self.twin = twin
+        self.clock = clock
+        self.gravity_in_world_m_s2 = twin.gravity_in_world_m_s2
+        self.magnetic_field_in_world_ut = twin.magnetic_field_in_world_ut
+
+    def sensor_truth(self, sensor: str, t_s: float) -> SensorTruth:
+        return self.twin.sensor_truth(sensor, self.clock.now())
+
+    def apply_valve_duties(self, duties_permille: Sequence[int], t_s: float) -> None:
+        self.twin.apply_valve_duties(duties_permille, self.clock.now())
+
+
+@dataclass
+class SimulatedDevices:
+    """Where the session's drivers find the emulated devices."""
+
+    twin: DigitalTwin
+    valves_url: str | None
+    tracker_url: str | None
+    imu_bus: Any | None
+    valve_emulator: ValveEmulator | None
+    aurora_emulator: AuroraEmulator | None
+
+
+@contextlib.asynccontextmanager
+async def simulated_devices(profile: RigProfile, settings: BenchSettings, clock: Clock,
+                            seed: int | None = None) -> AsyncIterator[SimulatedDevices]:
+    """Build the twin and serve an emulator for every device the profile marks "sim" or
+    "pty"; the others keep their URLs (a session may mix real and emulated devices)."""
+    config = twin_config(profile) if seed is None else twin_config(profile, seed=seed)
+    twin = DigitalTwin(config)
+    plant = SessionPlant(twin, clock)
+    transports = settings.transports
+    suffix = next(_instances)
+    async with contextlib.AsyncExitStack() as stack:
+        valve_emulator = aurora_emulator = None
+        valves_url = tracker_url = None
+        if transports.valves in (SIM, PTY):
+            # Not shut down on exit: like the real board it keeps whatever the host left it
+            # with, so a test can see that the host closed the valves itself.
+            valve_emulator = ValveEmulator(plant, watchdog_s=settings.valves.watchdog_ms / 1000.0)
+            valves_url = await _serve(stack, transports.valves, f"valves-{suffix}", valve_emulator)
+        if transports.tracker in (SIM, PTY):
+            tools = {0x0A + index: name for index, name in enumerate(settings.tracker.tools)}
+            aurora_emulator = AuroraEmulator(plant, clock.now, tools, seed=config.seed)
+            tracker_url = await _serve(stack, transports.tracker, f"aurora-{suffix}", aurora_emulator)
+        imu_bus = None
+        if transports.imu_bus == SIM:
+            imu_bus = Icm20948BusEmulator(plant, clock.now, sensors={settings.imu.base_address: "base",
+                                                                     settings.imu.tip_address: "tip"},
+                                          seed=config.seed)
+        yield SimulatedDevices(twin, valves_url, tracker_url, imu_bus, valve_emulator, aurora_emulator)
+
+
+async def _serve(stack: contextlib.AsyncExitStack, mode: str, name: str, emulator: Any) -> str:
+    if mode == SIM:
+        return await stack.enter_async_context(serve_sim(name, emulator))
+    server = PtyServer(emulator, poll_interval_s=0.005, name=name).start()
+    stack.callback(server.stop)
+    return f"pty://{server.path}"
+

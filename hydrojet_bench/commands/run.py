@@ -1,0 +1,190 @@
+"""`hydrojet-bench run`: a bench session, on the simulated rig by default.
+
+Plays a plan (default: the paper's protocol, 40 calibration poses then nine sweeps),
+calibrates on the calibration poses when they end, estimates the disturbance live,
+records everything to an MCAP log, shows a live view, and at the end prints the paper's
+Table II for the session (optionally a report folder of plots) and the commands to try
+next. Ctrl-C or SIGTERM stop it cleanly: valves off, log finished.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import shlex
+import signal
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+
+from ..effects import qualified_parameter_names
+from ..errors import UserError
+from ..estimation.calibration import DEFAULT_NAMES
+from ..params_io import read_parameter_file
+from ..profile import load_profile
+from .common import build_model
+
+DEFAULT_LOG_DIR = Path("sessions")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("run", help="run a bench session (simulated rig by default)")
+    parser.add_argument("--profile", default="sim", help="rig profile: a TOML file or a shipped name (default: sim)")
+    parser.add_argument("--plan", default="paper",
+                        help="paper (default), calibration, sweeps, imu-vs-em, hold[:SECONDS], or a .csv/.toml plan file")
+    parser.add_argument("--log", type=Path, metavar="FILE",
+                        help=f"MCAP log to write (default: {DEFAULT_LOG_DIR}/<profile>-<time>.mcap)")
+    parser.add_argument("--model", choices=("cosserat", "prb"), help="kinematic model (default: the profile's)")
+    parser.add_argument("--effect", action="append", default=[], metavar="NAME",
+                        help="add an effect to the model: a library name or path/to/file.py:Class (repeatable)")
+    parser.add_argument("--params", type=Path, help="start from these calibrated parameters (from `calibrate`)")
+    parser.add_argument("--no-calibration", action="store_true",
+                        help="do not calibrate on the plan's calibration poses")
+    parser.add_argument("--time-scale", type=float, metavar="X",
+                        help="session seconds per wall second on the simulated rig (default: the profile's)")
+    parser.add_argument("--seed", type=int, help="digital twin noise seed (default: the profile's)")
+    parser.add_argument("--report", type=Path, metavar="DIR", help="write the session's figures to this folder")
+    parser.add_argument("--no-live", action="store_true", help="no live view (plain progress lines)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..bench.plan_choice import choose_plan
+    from ..bench.session import Session, SessionRequest
+    from ..bench.settings import bench_settings
+
+    profile = load_profile(args.profile)
+    settings = bench_settings(profile)
+    if args.time_scale is not None:
+        if not args.time_scale > 0:
+            raise UserError(f"--time-scale must be > 0, got {args.time_scale}")
+        if not settings.transports.simulated and args.time_scale != 1.0:
+            raise UserError("--time-scale applies to the simulated rig only; this profile drives real devices")
+        settings = _with_time_scale(settings, args.time_scale)
+    plan = choose_plan(args.plan, settle_s=settings.timing.settle_s)
+    model_name = args.model or settings.estimator.model
+    effect_specs = list(settings.estimator.effects) + args.effect
+    params = profile.model_parameters()
+    if args.params is not None:
+        parameter_file = read_parameter_file(args.params)
+        params = parameter_file.apply(params, args.params)
+        effect_specs = list(parameter_file.effects) + effect_specs
+        model_name = args.model or parameter_file.model
+    model, requested = build_model(model_name, effect_specs)
+    names = DEFAULT_NAMES + tuple(name for effect in requested for name in qualified_parameter_names(effect))
+    log_path = args.log or DEFAULT_LOG_DIR / f"{profile.name}-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
+    try:
+        log_path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise UserError(f"cannot create the log folder {log_path.parent}: {error.strerror}") from None
+    request = SessionRequest(profile=profile, settings=settings, plan=plan, log_path=log_path, model=model,
+                             effects=tuple(dict.fromkeys(effect_specs)), params=params,
+                             calibrate=not args.no_calibration, calibration_names=names, seed=args.seed,
+                             command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]))
+    console = Console()
+    console.print(f"session on [bold]{profile.name}[/] ({'simulated rig' if settings.transports.simulated else 'rig'}): "
+                  f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.timing.time_scale:g}, "
+                  f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; log {log_path}")
+    result = asyncio.run(_run_session(Session, request, console, live=not args.no_live and console.is_terminal))
+    if result is None:
+        console.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {log_path}")
+        return 143
+    _print_outcome(console, result, model.name, args)
+    return 0
+
+
+def _with_time_scale(settings, time_scale: float):
+    from dataclasses import replace
+
+    return replace(settings, timing=replace(settings.timing, time_scale=time_scale))
+
+
+async def _run_session(session_class, request, console: Console, live: bool):
+    from ..bench.live_view import LiveView
+
+    terminated = False
+    task = asyncio.current_task()
+    loop = asyncio.get_running_loop()
+
+    def on_sigterm() -> None:
+        nonlocal terminated
+        terminated = True
+        task.cancel()
+
+    loop.add_signal_handler(signal.SIGTERM, on_sigterm)
+    view_context = LiveView(console, request.settings.timing.time_scale, f"HydroJet bench: {request.profile.name}") \
+        if live else contextlib.nullcontext()
+    try:
+        with view_context as view:
+            on_update = view.update if live else _printer(console)
+            session = session_class(request, on_update=on_update)
+            return await session.run()
+    except asyncio.CancelledError:
+        if terminated:
+            task.uncancel()
+            return None
+        raise
+    finally:
+        loop.remove_signal_handler(signal.SIGTERM)
+
+
+def _printer(console: Console):
+    last = [-1]
+
+    def update(status) -> None:
+        # One line per sweep (and per 10 calibration poses) keeps a log file readable.
+        step = status.step
+        if step is None or status.step_index == last[0]:
+            return
+        last[0] = status.step_index
+        if status.phase == "done" or step.step % 10 == 0 or status.step_index + 1 == status.step_count:
+            online = "-" if status.online_error_deg is None else f"{status.online_error_deg:.2f}"
+            ref = "-" if status.ref_error_deg is None else f"{status.ref_error_deg:.2f}"
+            console.print(f"step {status.step_index + 1}/{status.step_count} {status.phase}: tip error ref {ref} deg, "
+                          f"online {online} deg; EM {status.em_frames} frames, IMU {status.imu_samples} samples",
+                          highlight=False)
+
+    return update
+
+
+def _print_outcome(console: Console, result, model_name: str, args: argparse.Namespace) -> None:
+    from ..analysis.compare import compare
+    from ..bench.live_estimation import predictions_from_estimates
+    from .compare import print_tables
+
+    console.print(f"session done: {result.completed_steps}/{result.step_count} steps, "
+                  f"{result.session_time_s:.0f} s session time in {result.wall_time_s:.1f} s wall time")
+    if result.calibration is not None:
+        console.print(f"calibration on the calibration poses: RMS {result.calibration.rms_orientation_deg_before:.2f} deg "
+                      f"-> {result.calibration.rms_orientation_deg_after:.2f} deg")
+    estimates = result.estimates
+    steps = result.steps
+    if steps is None or not estimates or len(estimates) != len(steps):
+        console.print("[yellow]no complete set of estimated steps to compare[/]")
+    else:
+        validation = steps.sweep >= 0
+        if validation.any():
+            rows = np.flatnonzero(validation)
+            validation_steps = steps.select(rows)
+            results = {}
+            for key in ("ref", "online"):
+                predictions = predictions_from_estimates([estimates[i] for i in rows], key)
+                if predictions is not None:
+                    results[key] = compare(predictions, validation_steps)
+            print_tables(console, results, f"{model_name}, live session")
+            if args.report:
+                from ..analysis.report import write_report
+
+                for path in write_report(args.report, results, validation_steps, model_name):
+                    console.print(f"wrote {path}")
+    log = result.log_path
+    console.print("\nnext:")
+    for line in (f"hydrojet-bench replay {log} --online            # re-run the estimation offline",
+                 f"hydrojet-bench compare {log} --params P.toml --online  # Table II from the log",
+                 f"hydrojet-bench diagnose {log} --model {model_name}     # which physical effect is missing?",
+                 f"hydrojet-bench sensors {log} --report sensors/  # IMU versus EM tracker"):
+        console.print(f"  {line}", highlight=False)
