@@ -31,7 +31,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         return
     skip = pytest.mark.skip(reason="hardware test: pass --rig PROFILE to run it")
     for item in items:
-        if "rig" in item.keywords:
+        if item.get_closest_marker("rig") is not None:
             item.add_marker(skip)
 
 
