@@ -18,7 +18,7 @@ from . import __version__
 from .errors import UserError
 
 # Order is the order shown in --help.
-COMMAND_MODULES = ("run", "replay", "demo", "simulate", "calibrate", "compare", "perf", "emulate", "recover")
+COMMAND_MODULES = ("run", "replay", "sensors", "demo", "simulate", "calibrate", "compare", "perf", "emulate", "recover")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -42,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except UserError as error:
-        Console(stderr=True).print(f"[bold red]error:[/] {error}", highlight=False)
+        Console(stderr=True).print(f"[bold red]error:[/] {error}", highlight=False, soft_wrap=True)
         return 2
     except KeyboardInterrupt:
         Console(stderr=True).print("interrupted")

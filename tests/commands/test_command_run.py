@@ -1,0 +1,83 @@
+"""`hydrojet-bench run` as a user starts it: a clean stop on SIGINT and SIGTERM (valves
+off, log finished), the live view, and clear errors for a user's mistakes."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from rich.console import Console
+
+from hydrojet_bench.bench.live_view import LiveView
+from hydrojet_bench.bench.session import SessionStatus
+from hydrojet_bench.logs import read_log
+from hydrojet_bench.plans import PlanStep
+
+
+def start_run(tmp_path: Path, *options: str) -> tuple[subprocess.Popen, Path]:
+    log_path = tmp_path / "run.mcap"
+    process = subprocess.Popen([sys.executable, "-m", "hydrojet_bench.cli", "run", "--plan", "sweeps", "--no-live",
+                                "--time-scale", "5", "--log", str(log_path), *options],
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    return process, log_path
+
+
+def wait_for_commands(log_path: Path, timeout_s: float = 120.0) -> None:
+    """Until the session has opened a jet (its log shows a non-zero command)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if log_path.exists():
+            commands = [m.data["jet_forces_n"] for m in read_log(log_path, topics=["/valves/command"]).messages]
+            if any(max(forces) > 0 for forces in commands):
+                return
+        time.sleep(0.5)
+    raise AssertionError("the session never commanded a jet")
+
+
+@pytest.mark.parametrize("signal_number, exit_code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_stops_the_session_cleanly(tmp_path, signal_number, exit_code):
+    process, log_path = start_run(tmp_path)
+    try:
+        wait_for_commands(log_path)
+        process.send_signal(signal_number)
+        output, _ = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert process.returncode == exit_code, output
+    assert "Traceback" not in output
+    contents = read_log(log_path)
+    assert not contents.truncated  # finished: summary and footer written
+    assert any("interrupted" in m.data["message"] for m in contents.on("/events"))
+    # The session's own last word to the valves: the driver's ALL_OFF is not a logged
+    # command, but no command after the interruption may open a jet.
+    interrupted_at = next(m.t_s for m in contents.on("/events") if "interrupted" in m.data["message"])
+    assert all(max(m.data["jet_forces_n"]) == 0 for m in contents.on("/valves/command") if m.t_s > interrupted_at)
+
+
+def test_run_reports_a_bad_plan_file_without_traceback(tmp_path):
+    plan = tmp_path / "plan.csv"
+    plan.write_text("q1,q2,q3\n0.05,0,0\n0.05,-0.01,0\n")
+    result = subprocess.run([sys.executable, "-m", "hydrojet_bench.cli", "run", "--plan", str(plan), "--no-live",
+                             "--log", str(tmp_path / "x.mcap")], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert "plan.csv, row 2" in result.stderr and "Traceback" not in result.stderr
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def test_live_view_renders_progress_errors_and_health():
+    status = SessionStatus(step_count=229, phase="sweep 3", step_index=99, step=PlanStep((0.05, 0.0, 0.0), 3, 7),
+                           remaining_session_s=600.0, ref_error_deg=1.234, online_error_deg=0.456,
+                           disturbance_norm_nm=2.5e-4, em_frames=4000, em_missing=3, imu_samples=1000)
+    status.events.append((12.0, "warning", "sensor not tracked: tip MISSING"))
+    console = Console(record=True, width=100)
+    console.print(LiveView(console, time_scale=25.0, title="test").render(status))
+    text = console.export_text()
+    for expected in ("step 100/229", "sweep 3", "q1 0.050", "ref 1.23", "online 0.46", "0.25 mN m",
+                     "4000 frames, 3 incomplete", "sensor not tracked", "ETA 00:24"):
+        assert expected in text, (expected, text)
