@@ -57,6 +57,15 @@ from .simulated_rig import SimulatedDevices, simulated_devices
 MAX_CONSECUTIVE_FAILURES = 20
 
 
+def _raise_if_cancel_was_swallowed() -> None:
+    """Python 3.11's wait_for (inside every driver request) can return a result while
+    losing a cancellation that arrived as it completed; the task still counts the
+    request, so honour it here rather than play the rest of the plan after Ctrl-C."""
+    task = asyncio.current_task()
+    if task is not None and task.cancelling():
+        raise asyncio.CancelledError
+
+
 class SessionAborted(UserError):
     """A device failed for good; the session stopped with valves off and its log finished."""
 
@@ -358,6 +367,7 @@ class Session:
             self.imu.begin(step)
             started = self.clock.now()
             await self._command(valves, step.jet_forces_n)
+            _raise_if_cancel_was_swallowed()
             end = started + step.settle_s
             await self.clock.sleep_until(end)
             remaining -= step.settle_s
@@ -366,6 +376,7 @@ class Session:
             self._settle(index, step, self.clock.now(), min(timing.window_s, step.settle_s))
             self.on_update(status)
         await self._finish_calibration()
+        _raise_if_cancel_was_swallowed()
         await self._command(valves, (0.0, 0.0, 0.0))
         status.phase = "done"
         self.on_update(status)
