@@ -24,6 +24,9 @@ from hydrojet_bench.geometry import quat_conjugate, quat_from_matrix, quat_multi
 
 # ahrs' default MARG gain (Madgwick's beta), rad/s.
 DEFAULT_GAIN = 0.041
+# A gap of more than this many sample periods restarts the filter from gravity and the
+# field: the orientation integrated over the gap from one gyro sample is not to be trusted.
+MAX_GAP_PERIODS = 5
 
 
 def orientation_from_gravity_and_field(accel: Sequence[float], mag: Sequence[float] | None) -> np.ndarray:
@@ -69,9 +72,13 @@ class ImuOrientationFilter:
         """Fuse one sample; returns the orientation (w, x, y, z), IMU frame -> earth.
 
         The step is the time since the previous sample (its t_s), falling back to the
-        nominal period if the stamps are not increasing."""
+        nominal period if the stamps are not increasing; after a gap of more than
+        `MAX_GAP_PERIODS` periods the filter restarts from gravity and the field."""
         mag = sample.mag_ut if self.use_magnetometer else None
-        if self.quaternion is None:
+        stale = self._last_t_s is not None and sample.t_s - self._last_t_s > MAX_GAP_PERIODS * self.default_dt_s
+        if self.quaternion is None or stale:
+            # First sample, or after a gap: integrating the gyro's rate now over the whole
+            # gap would turn one fast moment into a large, slowly corrected error.
             self.quaternion = orientation_from_gravity_and_field(sample.accel_m_s2, mag)
             self._last_t_s = sample.t_s
             return self.quaternion.copy()

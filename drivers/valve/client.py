@@ -351,7 +351,9 @@ class ValveController:
     async def _heartbeat_loop(self) -> None:
         assert self.heartbeat_interval_s is not None
         loop = asyncio.get_running_loop()
-        while True:
+        # Checked each turn as well as cancelled on close: Python 3.11's wait_for can
+        # swallow the cancellation, and a PING after close would raise "not open".
+        while self._open:
             idle_s = loop.time() - self._last_tx_s
             if idle_s < self.heartbeat_interval_s:
                 await asyncio.sleep(self.heartbeat_interval_s - idle_s)

@@ -70,6 +70,17 @@ class SessionAborted(UserError):
     """A device failed for good; the session stopped with valves off and its log finished."""
 
 
+# Failures of the rig rather than of the software: reported as one line, not a traceback.
+DEVICE_ERRORS = (AuroraError, ImuError, ValveError, TransportError)
+
+
+def _first_leaf(error: BaseException) -> BaseException:
+    """The first exception inside (nested) exception groups, e.g. from a TaskGroup."""
+    while isinstance(error, BaseExceptionGroup):
+        error = error.exceptions[0]
+    return error
+
+
 @dataclass(frozen=True)
 class SessionRequest:
     """What to run. params: parameters to start from (calibrated earlier, or the
@@ -172,7 +183,12 @@ class Session:
                 self.event("warning", "session", "interrupted: valves closed, log finished")
                 raise
             except Exception as error:
-                self.event("error", "session", f"stopped: {type(error).__name__}: {error}")
+                cause = _first_leaf(error)
+                self.event("error", "session", f"stopped: {type(cause).__name__}: {cause}")
+                if isinstance(cause, UserError):
+                    raise cause from error
+                if isinstance(cause, DEVICE_ERRORS):
+                    raise SessionAborted(f"device failure: {cause}") from error
                 raise
         steps = Dataset.concatenate(self.settled_rows) if self.settled_rows else None
         return SessionResult(request.log_path, completed, len(request.plan), self.clock.now(),
@@ -209,6 +225,9 @@ class Session:
             await stack.enter_async_context(tracker)
             self.event("info", "tracker", f"tracking {', '.join(tracker.handles)} ({tracker.version_text.strip()[:40]})")
             imus = await self._open_imus(imu_bus)
+            # The first solve of a process loads the compiled kernels (about a second; far
+            # longer on a busy machine): done now, before any valve is armed.
+            await asyncio.to_thread(request.model.solve, np.zeros(3), self.params)
             valves = ValveController(valves_url, calibrations=settings.valves.calibrations,
                                      retries=settings.valves.retries,
                                      reply_timeout_s=settings.valves.reply_timeout_ms / 1000.0,
@@ -373,7 +392,7 @@ class Session:
             remaining -= step.settle_s
             status.remaining_session_s = remaining
             status.session_time_s = self.clock.now()
-            self._settle(index, step, self.clock.now(), min(timing.window_s, step.settle_s))
+            await self._settle(index, step, self.clock.now(), min(timing.window_s, step.settle_s))
             self.on_update(status)
         await self._finish_calibration()
         _raise_if_cancel_was_swallowed()
@@ -399,7 +418,7 @@ class Session:
         self._log.write("/valves/reply", {"t_s": t_s, "command": "SET_ALL", "ok": True, "code": None,
                                           "detail": f"duties {list(duties)} per mille"}, t_s=t_s)
 
-    def _settle(self, index: int, step: PlanStep, end_s: float, window_s: float) -> None:
+    async def _settle(self, index: int, step: PlanStep, end_s: float, window_s: float) -> None:
         settled = self.em.settled(end_s, window_s)
         if settled is None:
             self.event("warning", "plan", f"step {index}: no EM sample in its last {window_s:g} s; not estimated")
@@ -418,14 +437,15 @@ class Session:
         }, t_s=end_s)
         if step.sweep == CALIBRATION_SWEEP and self.request.calibrate:
             self._calibration_rows.append(settled)
-        self._estimate(index, settled, end_s)
+        await self._estimate(index, settled, end_s)
 
-    def _estimate(self, index: int, settled: Dataset, t_s: float) -> None:
+    async def _estimate(self, index: int, settled: Dataset, t_s: float) -> None:
         if self.estimation is None:
             online = self.request.settings.estimator.online_settings if self.request.settings.estimator.online else None
             self.estimation = StepEstimation(self.request.model, self.params, online)
         try:
-            estimate = self.estimation.update(settled)
+            # In a worker thread: a slow solve must never delay the valve heartbeat.
+            estimate = await asyncio.to_thread(self.estimation.update, settled)
         except ConvergenceError as error:
             self.event("warning", "model", f"step {index}: model did not converge ({error})")
             return

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from hydrojet_bench.bench.replay import live_difference_deg, read_session, replay
-from hydrojet_bench.bench.session import Session, SessionRequest
+from drivers.transport.sim import unregister_device
+from hydrojet_bench.bench.session import Session, SessionAborted, SessionRequest
 from hydrojet_bench.bench.settings import bench_settings
 from hydrojet_bench.commands.common import build_model
 from hydrojet_bench.estimation import OnlineSettings
@@ -136,3 +137,22 @@ def test_cancelling_a_session_closes_the_valves_and_finishes_the_log(tmp_path):
     assert any(max(forces) > 0 for forces in commands)
     events = [m.data["message"] for m in contents.on("/events")]
     assert any("interrupted" in message for message in events)
+
+
+def test_a_lost_device_stops_the_session_with_a_clear_error_and_valves_closed(tmp_path):
+    log_path = tmp_path / "lost.mcap"
+    session = Session(make_request(log_path, plan=validation_sweeps(steps_up=10, repetitions=1, settle_s=SETTLE_S)))
+
+    async def unplug_tracker_midway():
+        task = asyncio.create_task(session.run())
+        while session.status.step_index < 3:
+            await asyncio.sleep(0.02)
+        unregister_device(session._devices.tracker_url.removeprefix("sim://"))
+        with pytest.raises(SessionAborted, match="EM tracker lost"):
+            await task
+
+    asyncio.run(unplug_tracker_midway())
+    assert session._devices.valve_emulator.duties_permille == (0, 0, 0)
+    contents = read_log(log_path)
+    assert not contents.truncated
+    assert any("EM tracker lost" in m.data["message"] for m in contents.on("/events"))

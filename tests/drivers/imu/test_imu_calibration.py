@@ -118,3 +118,20 @@ def test_filter_validates_and_falls_back_to_imu_update_without_field() -> None:
     # without a field the heading is arbitrary: compare the tilt (the gravity direction)
     up_in_sensor = matrix_from_quat(q).T @ np.array([0.0, 0.0, 1.0])
     assert up_in_sensor == pytest.approx(np.asarray(accel) / 9.81, abs=1e-3)
+
+
+def test_filter_restarts_from_gravity_after_a_gap_instead_of_integrating_across_it() -> None:
+    from drivers.imu.calibration import ImuSample
+
+    level = (0.0, 0.0, 9.81)
+    field = (20.0, 0.0, -45.0)
+    filter_ = ImuOrientationFilter(10.0)
+    start = filter_.update(ImuSample(0.0, level, (0.0, 0.0, 0.0), field, 25.0, True))
+    # One sample of a fast turn (2 rad/s) arriving 1 s (ten periods) later, at rest again
+    # by the accelerometer and magnetometer: integrating it over the gap would turn the
+    # estimate by 2 rad; restarting keeps it level, where the sensor actually is.
+    after_gap = filter_.update(ImuSample(1.0, level, (0.0, 0.0, 2.0), field, 25.0, True))
+    assert rotation_angle_deg(start, after_gap) < 1.0
+    # Within the normal period the gyro is integrated as usual.
+    turned = filter_.update(ImuSample(1.1, level, (0.0, 0.0, 2.0), field, 25.0, True))
+    assert rotation_angle_deg(after_gap, turned) > 5.0
