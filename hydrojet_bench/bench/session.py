@@ -43,6 +43,7 @@ from ..estimation.calibration import CalibrationResult
 from ..analysis.compare import calibrate_dataset
 from ..logs import LogWriter
 from ..models.shooting import ShootingModel
+from ..effects import effect_values
 from ..geometry import quat_from_matrix
 from ..params import PARAMETER_NAMES, ModelParameters, get_parameter
 from ..plans import CALIBRATION_SWEEP, Plan, PlanStep
@@ -505,10 +506,14 @@ class Session:
     def _write_parameters(self) -> None:
         t_s = self.clock.now()
         calibration = self.calibration
-        names = list(PARAMETER_NAMES) + [name for name in self.params.effect_values if name not in PARAMETER_NAMES]
+        values = {name: get_parameter(self.params, name) for name in PARAMETER_NAMES}
+        # Every parameter of every effect the model has, defaults included, so replay
+        # rebuilds exactly the parameters the live estimator used.
+        values.update({f"{effect.name}.{name}": value for effect in self.request.model.effects
+                       for name, value in effect_values(effect, self.params).items()})
         self._log.write("/bench/parameters", {
             "t_s": t_s, "model": self.request.model.name, "effects": list(self.request.effects),
-            "parameters": {name: get_parameter(self.params, name) for name in names},
+            "parameters": values,
             "calibrated": calibration is not None,
             "rms_orientation_deg_before": None if calibration is None else calibration.rms_orientation_deg_before,
             "rms_orientation_deg_after": None if calibration is None else calibration.rms_orientation_deg_after,

@@ -156,3 +156,16 @@ def test_a_lost_device_stops_the_session_with_a_clear_error_and_valves_closed(tm
     contents = read_log(log_path)
     assert not contents.truncated
     assert any("EM tracker lost" in m.data["message"] for m in contents.on("/events"))
+
+
+def test_a_session_with_an_effect_logs_its_parameters(tmp_path):
+    model, _ = build_model("cosserat", ["pressure_stiffening"])
+    profile = load_profile("sim")
+    params = profile.model_parameters(effect_values=(("pressure_stiffening.coefficient_1_n", 1.5),))
+    log_path = tmp_path / "effect.mcap"
+    request = make_request(log_path, plan=validation_sweeps(steps_up=1, repetitions=1, settle_s=SETTLE_S),
+                           model=model, effects=("pressure_stiffening",), params=params)
+    asyncio.run(run_without_leaks(Session(request)))
+    logged = read_log(log_path, topics=["/bench/parameters"]).messages[0].data
+    assert logged["parameters"]["pressure_stiffening.coefficient_1_n"] == 1.5
+    assert logged["effects"] == ["pressure_stiffening"]
