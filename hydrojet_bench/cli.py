@@ -18,7 +18,8 @@ from . import __version__
 from .errors import UserError
 
 # Order is the order shown in --help.
-COMMAND_MODULES = ("run", "replay", "sensors", "demo", "simulate", "calibrate", "compare", "perf", "emulate", "recover")
+COMMAND_MODULES = ("run", "replay", "sensors", "demo", "simulate", "calibrate", "compare", "diagnose",
+                   "perf", "emulate", "recover")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -5,17 +5,32 @@ relative-to-base quaternions. We minimise the same discrepancy as a vector: the
 rotation vector of R_pred^T R_meas (rad, tip sensor frame), whose squared norm is the
 squared relative angle theta^2 and, for small errors, 8 (1 - |<q_pred, q_meas>|), i.e.
 eight times Huynh's Phi_4 that the paper cites. A vector residual gives the
-least-squares solver a Jacobian straight from the sensitivity matrix: the rotation rows
-of S, carried into the sensor frame by its mounting, with a minus sign.
+least-squares solver a Jacobian straight from the sensitivity matrix: for w_d, the
+rotation rows of S, carried into the sensor frame by its mounting, with a minus sign.
+Every other parameter may also change what the sensors read (a sensor-mounting effect
+moves no part of the rod, so its tip twist is zero), so its column is the forward
+difference of the residual itself, with the steps `sensitivity` uses; one parameter at
+a time over all poses, which then share the model's packed problem.
 
 Optional position term: when positions are measured, ``position_weight_rad_per_m``
 turns each tip position error (base sensor frame, m) into residual radians: 1 rad per
 mm (1000) makes a 1 mm miss count as much as a 57 degree one, far too much; the
 default 10 rad/m makes 1 mm weigh like 0.57 degrees, close to the EM tracker's
-0.48 mm / 0.70 deg accuracy ratio. The tip sensor is taken at the rod tip.
+0.48 mm / 0.70 deg accuracy ratio. The tip sensor is taken at the rod tip unless a pose
+gives the point it was measured at (`CalibrationPose.position_offset_in_tip_m`).
 
 Standard errors come from J^T J at the optimum scaled by the residual variance; pairs of
 parameters whose correlation exceeds 0.99 in magnitude are reported as unidentifiable.
+
+Path dependence: a clamp with play (`RodProblem.depends_on_previous_state`) makes each
+pose depend on the ones before it. By default poses are independent and each solve is
+only warm-started from the last; with ``follow_path=True`` the poses are taken as one
+recorded path in time order and each solve carries the previous pose's state
+(``previous=``), as the rig did. Poses outside ``fitted`` are then solved to carry that
+state across, without entering the fit. Without path state both give the same numbers.
+With it, every Jacobian column is a forward difference along the whole perturbed path:
+a parameter also acts on later poses through the clamp state it leaves behind, which a
+per-pose sensitivity misses (and a fit guided by it stalls far from the optimum).
 """
 
 from __future__ import annotations
@@ -30,8 +45,8 @@ from ..effects import EffectParameter
 from ..errors import ConvergenceError
 from ..geometry import body_rotation_error
 from ..models.shooting import ShootingModel, Solution
-from ..params import PARAMETER_NAMES, ModelParameters, get_parameter, with_parameters
-from ..sensitivity import effect_parameter, parameter_scale, sensitivity
+from ..params import DISTURBANCE_NAMES, PARAMETER_NAMES, ModelParameters, get_parameter, with_parameters
+from ..sensitivity import DEFAULT_RELATIVE_STEP, effect_parameter, parameter_scale, sensitivity
 
 # Physical bounds of the core parameters; effect parameters carry their own.
 CORE_BOUNDS: dict[str, tuple[float, float]] = {
@@ -47,12 +62,17 @@ DEFAULT_POSITION_WEIGHT_RAD_PER_M = 10.0
 class CalibrationPose:
     """One static pose: jet forces (N), the measured tip sensor orientation in the base
     sensor's frame (3x3), gravity in the base frame then (m/s^2), and optionally the
-    measured tip position in the base sensor frame (m)."""
+    measured tip position in the base sensor frame (m), taken at the point
+    ``position_offset_in_tip_m`` of the tip frame (m; None: the rod tip itself). Giving
+    the tip sensor's own origin and offset compares what the tracker measured directly,
+    rather than a rod tip reconstructed with the measured orientation (which an unknown
+    sensor mounting rotation would move)."""
 
     jet_forces_n: np.ndarray
     measured_tip_in_base_sensor: np.ndarray
     gravity_in_base_m_s2: tuple[float, float, float]
     tip_position_in_base_sensor_m: np.ndarray | None = None
+    position_offset_in_tip_m: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -87,65 +107,136 @@ def parameter_bounds(model: ShootingModel, name: str) -> tuple[float, float]:
 def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: ModelParameters,
               names: Sequence[str] = DEFAULT_NAMES, *,
               position_weight_rad_per_m: float = DEFAULT_POSITION_WEIGHT_RAD_PER_M,
-              max_evaluations: int = 100) -> CalibrationResult:
+              max_evaluations: int = 100, follow_path: bool = False,
+              fitted: Sequence[bool] | None = None, cost_tolerance: float = 1e-10) -> CalibrationResult:
     """Fit ``names`` to the poses by bounded nonlinear least squares (trust region
-    reflective), starting from ``initial``. Raises ValueError for too few poses."""
+    reflective), starting from ``initial``. Raises ValueError for too few poses.
+
+    follow_path: the poses are one recorded path, in time order: every solve gets the
+        pose before it as ``previous=`` (path state), not only as a warm start.
+    fitted: which poses enter the fit (default all); the others are only solved to carry
+        the path state, so they need ``follow_path``.
+    cost_tolerance: the fit stops once a step lowers the cost by less than this fraction
+        (least_squares' ftol; its xtol and gtol stay at 1e-10).
+    """
     names = tuple(names)
+    fit_mask = np.ones(len(poses), dtype=bool) if fitted is None else np.asarray(fitted, dtype=bool)
+    if fit_mask.shape != (len(poses),):
+        raise ValueError(f"fitted has {fit_mask.size} entries for {len(poses)} poses")
+    if not follow_path and not fit_mask.all():
+        raise ValueError("poses left out of the fit only carry path state: pass follow_path=True")
+    fitted_indices = np.flatnonzero(fit_mask)
     use_positions = position_weight_rad_per_m > 0 and all(
-        pose.tip_position_in_base_sensor_m is not None for pose in poses)
+        poses[index].tip_position_in_base_sensor_m is not None for index in fitted_indices)
     rows_per_pose = 6 if use_positions else 3
-    if len(poses) * rows_per_pose <= len(names):
-        raise ValueError(f"{len(poses)} poses cannot determine {len(names)} parameters")
+    if len(fitted_indices) * rows_per_pose <= len(names):
+        raise ValueError(f"{len(fitted_indices)} poses cannot determine {len(names)} parameters")
     bounds = np.array([parameter_bounds(model, name) for name in names]).T
     scales = np.array([parameter_scale(model, name) for name in names])
     start = np.array([get_parameter(initial, name, _default(model, name)) for name in names])
     start = np.clip(start, bounds[0], bounds[1])
-    per_pose_params = [_with_gravity(initial, pose) for pose in poses]
-    cache: dict[bytes, tuple[np.ndarray, list[Solution]]] = {}
+    # Poses recorded under the same gravity share one parameter object per evaluation, so
+    # the model reuses its packed problem between them instead of rebuilding it.
+    gravities = [tuple(pose.gravity_in_base_m_s2) for pose in poses]
+    distinct = list(dict.fromkeys(gravities))
+    gravity_group = [distinct.index(gravity) for gravity in gravities] if len(distinct) > 1 else [0] * len(poses)
+    measured = np.array([poses[index].measured_tip_in_base_sensor for index in fitted_indices])
+    measured_positions = (np.array([poses[index].tip_position_in_base_sensor_m for index in fitted_indices])
+                          if use_positions else None)
+    offsets = np.array([poses[index].position_offset_in_tip_m or (0.0, 0.0, 0.0) for index in fitted_indices])
+    disturbance_columns = [column for column, name in enumerate(names) if name in DISTURBANCE_NAMES]
+    cache: dict[bytes, tuple[np.ndarray, list[Solution], list[ModelParameters]]] = {}
 
-    def params_for(x: np.ndarray, index: int) -> ModelParameters:
-        return with_parameters(per_pose_params[index], dict(zip(names, x)))
+    def parameters_at(x: np.ndarray) -> list[ModelParameters]:
+        fitted_params = with_parameters(initial, dict(zip(names, x)))
+        by_gravity = [replace(fitted_params, gravity_in_base_m_s2=gravity) for gravity in distinct]
+        return [by_gravity[group] for group in gravity_group]
 
-    def evaluate(x: np.ndarray) -> tuple[np.ndarray, list[Solution]]:
+    def residual_rows(solutions: Sequence[Solution]) -> np.ndarray:
+        """(fitted poses, rows_per_pose) residuals of solutions at the fitted poses."""
+        rows = np.empty((len(solutions), rows_per_pose))
+        predicted = np.array([solution.tip_sensor_in_base_sensor() for solution in solutions])
+        rows[:, :3] = body_rotation_error(predicted, measured)
+        if measured_positions is not None:
+            positions = np.array([s.base_sensor_mounting.T @ (s.tip_position_in_base_m + s.tip_rotation_in_base @ o)
+                                  for s, o in zip(solutions, offsets)])
+            rows[:, 3:] = position_weight_rad_per_m * (positions - measured_positions)
+        return rows
+
+    def evaluate(x: np.ndarray) -> tuple[np.ndarray, list[Solution], list[ModelParameters]]:
         key = x.tobytes()
         if key not in cache:
             cache.clear()  # only the latest point is asked for again (by the Jacobian)
-            residuals = np.empty(len(poses) * rows_per_pose)
+            params = parameters_at(x)
             solutions: list[Solution] = []
             previous: Solution | None = None
             for index, pose in enumerate(poses):
-                solution = model.solve(pose.jet_forces_n, params_for(x, index), warm_start=previous)
-                solutions.append(solution)
-                previous = solution
-                rows = residuals[index * rows_per_pose:(index + 1) * rows_per_pose]
-                rows[:3] = body_rotation_error(solution.tip_sensor_in_base_sensor(), pose.measured_tip_in_base_sensor)
-                if use_positions:
-                    predicted = solution.base_sensor_mounting.T @ solution.tip_position_in_base_m
-                    rows[3:] = position_weight_rad_per_m * (predicted - pose.tip_position_in_base_sensor_m)
-            cache[key] = (residuals, solutions)
+                if follow_path:
+                    previous = model.solve(pose.jet_forces_n, params[index], previous=previous)
+                else:
+                    previous = model.solve(pose.jet_forces_n, params[index], warm_start=previous)
+                solutions.append(previous)
+            residuals = residual_rows([solutions[index] for index in fitted_indices]).ravel()
+            cache[key] = (residuals, solutions, params)
         return cache[key]
 
     def residual(x: np.ndarray) -> np.ndarray:
         return evaluate(x)[0]
 
     def jacobian(x: np.ndarray) -> np.ndarray:
-        _, solutions = evaluate(x)
-        matrix = np.empty((len(poses) * rows_per_pose, len(names)))
-        for index, (pose, solution) in enumerate(zip(poses, solutions)):
-            columns = sensitivity(model, pose.jet_forces_n, params_for(x, index), names, nominal=solution).matrix
-            rows = matrix[index * rows_per_pose:(index + 1) * rows_per_pose]
-            # d(log(R_pred^T R_meas))/dzeta = -(tip sensor mounting)^T S_rot, to first order.
-            rows[:3] = -solution.tip_sensor_mounting.T @ columns[3:]
-            if use_positions:
-                # The tip moves by R_tip v for a body twist (v, omega).
-                rows[3:] = position_weight_rad_per_m * (
-                    solution.base_sensor_mounting.T @ solution.tip_rotation_in_base @ columns[:3])
+        residuals, solutions, params = evaluate(x)
+        matrix = np.empty((len(fitted_indices) * rows_per_pose, len(names)))
+        # On a path with state (a clamp with play) a parameter changes every later pose
+        # through the state it leaves behind: differentiate along the whole perturbed path.
+        along_path = follow_path and model.build_problem(poses[0].jet_forces_n, params[0]).depends_on_previous_state
+        batched = [] if along_path else disturbance_columns
+        if batched:
+            wanted = [names[column] for column in batched]
+            for row, index in enumerate(fitted_indices):
+                pose, solution = poses[index], solutions[index]
+                # Each perturbed solve starts from the same history as the nominal one.
+                history = solutions[index - 1] if follow_path and index > 0 else None
+                columns = sensitivity(model, pose.jet_forces_n, params[index], wanted, nominal=solution,
+                                      previous=history).matrix
+                rows = np.empty((rows_per_pose, len(batched)))
+                # d(log(R_pred^T R_meas))/dzeta = -(tip sensor mounting)^T S_rot, to first order.
+                rows[:3] = -solution.tip_sensor_mounting.T @ columns[3:]
+                if use_positions:
+                    # A point o of the tip frame moves by R_tip (v + omega x o) for a body twist (v, omega).
+                    moved = columns[:3] + np.cross(columns[3:], offsets[row], axis=0)
+                    rows[3:] = position_weight_rad_per_m * (
+                        solution.base_sensor_mounting.T @ solution.tip_rotation_in_base @ moved)
+                matrix[row * rows_per_pose:(row + 1) * rows_per_pose, batched] = rows
+        # Other parameters may change the shape, the sensor mountings or both: forward
+        # differences of the residual itself, one parameter at a time over all poses (which
+        # then share one packed problem), with the steps `sensitivity` uses.
+        for column in (column for column in range(len(names)) if column not in batched):
+            step = DEFAULT_RELATIVE_STEP * max(abs(x[column]), scales[column])
+            if x[column] + step > bounds[1][column]:
+                step = -step
+            shifted = x.copy()
+            shifted[column] += step
+            perturbed_params = parameters_at(shifted)
+            perturbed: list[Solution] = []
+            if along_path:
+                previous = None
+                for index, pose in enumerate(poses):
+                    previous = model.solve(pose.jet_forces_n, perturbed_params[index], previous=previous,
+                                           warm_start=solutions[index])
+                    perturbed.append(previous)
+                perturbed = [perturbed[index] for index in fitted_indices]
+            else:
+                for index in fitted_indices:
+                    history = solutions[index - 1] if follow_path and index > 0 else None
+                    perturbed.append(model.solve(poses[index].jet_forces_n, perturbed_params[index],
+                                                 previous=history, warm_start=solutions[index]))
+            matrix[:, column] = (residual_rows(perturbed).ravel() - residuals) / step
         return matrix
 
     try:
         before = residual(start)
         fit = least_squares(residual, start, jac=jacobian, bounds=bounds, x_scale=scales,
-                            max_nfev=max_evaluations, xtol=1e-10, ftol=1e-10, gtol=1e-10)
+                            max_nfev=max_evaluations, xtol=1e-10, ftol=cost_tolerance, gtol=1e-10)
     except ConvergenceError as error:
         raise ConvergenceError(f"calibration stopped: a model solve failed ({error})") from error
     values = fit.x
@@ -177,10 +268,6 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
 def _default(model: ShootingModel, name: str) -> float | None:
     parameter = effect_parameter(model, name)
     return parameter.default if parameter is not None else None
-
-
-def _with_gravity(params: ModelParameters, pose: CalibrationPose) -> ModelParameters:
-    return replace(params, gravity_in_base_m_s2=tuple(pose.gravity_in_base_m_s2))
 
 
 def _rms_angle_deg(residuals: np.ndarray, rows_per_pose: int) -> float:

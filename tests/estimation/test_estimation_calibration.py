@@ -79,3 +79,79 @@ def test_too_few_poses_and_unknown_parameters_are_refused():
         calibrate(CosseratModel(), poses(count=1), INITIAL)
     with pytest.raises(KeyError, match="no enabled effect"):
         calibrate(CosseratModel(), poses(count=5), INITIAL, names=("E0", "jet_gain.gain_1"))
+
+
+# --- path dependence, sensor mountings, positions at the sensor -----------------------
+
+
+def sweep_path(truth_model, truth, count=12, peak_n=0.1):
+    """Noise-free poses along one recorded path: jet 1 up and down, then jet 2 up and down,
+    each solve carrying the previous one's clamp state."""
+    up = np.linspace(0.0, peak_n, count // 4 + 1)
+    ramp = np.concatenate([up, up[-2::-1]])
+    commands = [np.array([f, 0.0, 0.0]) for f in ramp] + [np.array([0.0, f, 0.0]) for f in ramp]
+    result, previous = [], None
+    for jets in commands:
+        previous = truth_model.solve(jets, truth, previous=previous)
+        result.append(CalibrationPose(jets, previous.tip_sensor_in_base_sensor(), GRAVITY))
+    return result
+
+
+def test_following_the_path_changes_nothing_without_path_state():
+    plain = calibrate(CosseratModel(), poses(count=15), INITIAL)
+    along = calibrate(CosseratModel(), poses(count=15), INITIAL, follow_path=True)
+    np.testing.assert_array_equal(along.values, plain.values)
+    assert along.evaluations == plain.evaluations
+
+
+def test_a_clamp_with_play_is_recovered_only_along_the_recorded_path():
+    names = ("base_hysteresis.compliance_rad_per_nm", "base_hysteresis.play_rad")
+    truth = with_parameters(INITIAL, dict(zip(names, (50.0, 0.02))))
+    path = sweep_path(CosseratModel(effects=("gravity", "base_hysteresis")), truth)
+    model = CosseratModel(effects=("gravity", "base_hysteresis"))
+    along = calibrate(model, path, INITIAL, names, follow_path=True)
+    # Noise-free data: the true values to the solver's precision (1e-4 relative is three
+    # decades above the finite-difference noise of the Jacobian, see sensitivity.py).
+    np.testing.assert_allclose(along.values, [50.0, 0.02], rtol=1e-4)
+    assert along.rms_orientation_deg_after < 1e-4
+    # Solved as independent poses, every pose starts from a clamp at rest: the play
+    # shows as a dead zone, not as the loop the data hold, and the fit cannot match them.
+    independent = calibrate(model, path, INITIAL, names)
+    assert independent.rms_orientation_deg_after > 100 * along.rms_orientation_deg_after
+
+
+def test_poses_outside_the_fit_still_carry_the_path_state():
+    names = ("base_hysteresis.compliance_rad_per_nm", "base_hysteresis.play_rad")
+    truth = with_parameters(INITIAL, dict(zip(names, (50.0, 0.02))))
+    path = sweep_path(CosseratModel(effects=("gravity", "base_hysteresis")), truth)
+    fitted = np.arange(len(path)) % 3 != 1  # a third of the path is only solved, not fitted
+    model = CosseratModel(effects=("gravity", "base_hysteresis"))
+    result = calibrate(model, path, INITIAL, names, follow_path=True, fitted=fitted)
+    np.testing.assert_allclose(result.values, [50.0, 0.02], rtol=1e-4)
+    with pytest.raises(ValueError, match="follow_path"):
+        calibrate(model, path, INITIAL, names, fitted=fitted)
+    with pytest.raises(ValueError, match="entries"):
+        calibrate(model, path, INITIAL, names, follow_path=True, fitted=fitted[:-1])
+
+
+def test_a_sensor_mounting_and_positions_at_the_sensor_are_recovered():
+    # A mounting rotation moves no part of the rod, so its tip twist is zero: only the
+    # residual itself shows it. Positions are given where the sensor sits (10 mm ahead of
+    # the tip), which the w_d columns must carry to that point.
+    mounting = {"sensor_mounting.rx_rad": 0.05, "sensor_mounting.ry_rad": -0.03, "sensor_mounting.rz_rad": 0.04}
+    truth = with_parameters(TRUTH, mounting)
+    offset = (0.0, 0.0, 0.010)
+    model = CosseratModel(effects=("gravity", "sensor_mounting"))
+    rng = np.random.default_rng(5)
+    data = []
+    for _ in range(20):
+        jets = rng.uniform(0.0, 0.12, 3) * (rng.uniform(size=3) < 0.7)
+        shape = model.solve(jets, truth)
+        sensor = shape.tip_position_in_base_m + shape.tip_rotation_in_base @ np.array(offset)
+        data.append(CalibrationPose(jets, shape.tip_sensor_in_base_sensor(), GRAVITY, sensor, offset))
+    names = ("E0", "EL", "L", "wd_fx", "wd_fy", "wd_fz", "wd_mx", "wd_my", "wd_mz") + tuple(mounting)
+    result = calibrate(model, data, INITIAL, names)
+    assert result.rms_orientation_deg_after < 1e-4
+    expected = {"E0": 2.7e5, "EL": 1.7e5, "L": 0.071, "wd_mz": 2e-4, "wd_mx": 1e-4, "wd_fy": 3e-3, **mounting}
+    for name, value in expected.items():
+        assert result.values[result.names.index(name)] == pytest.approx(value, rel=1e-4, abs=1e-7), name

@@ -1,0 +1,264 @@
+"""Fitting one model (the baseline, or the baseline plus a candidate effect) to the
+training steps of a session and predicting every step along the recorded path.
+
+Both fits and predictions follow the session in recorded order, each solve carrying the
+path state of the one before (`calibrate(..., follow_path=True)`, `predict_path`), so a
+clamp with play sees loading and unloading as the rig did.
+
+Gravity: on a clamped base the per-step gravity the base sensor gives (`Dataset.
+gravity_in_base_m_s2`) differs from step to step only by that sensor's noise. A model
+fed that per-step gravity bends with the noise and so "predicts" part of it, which would
+put the held-out error of a correct model below the measured noise floor. When every
+step lies within `STATIC_BASE_DEG` of their mean, the mean is used for all of them.
+
+Residual rows: the orientation rotation vector (rad) and, when positions were measured,
+the error of the tip sensor's position (m, see `measurements`) times
+``position_weight_rad_per_m`` = sigma_orientation / sigma_position per axis, the ratio
+of the measured noise floors. Every row then carries the same noise, so the
+least-squares fit is the maximum-likelihood one and the sum of squares over sigma^2 is
+the chi-square a score can use.
+
+Candidates are fitted in worker processes (``workers``, forked, so effects loaded from
+user files travel along); each starts from the calibrated baseline with its own
+parameters at their defaults (which leave the model unchanged), so it only has to move
+away from an optimum it already shares.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import nullcontext
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ...data.dataset import Dataset
+from ...effects import Effect, qualified_parameter_names
+from ...errors import ConvergenceError
+from ...estimation.calibration import DEFAULT_NAMES, CalibrationPose, calibrate
+from ...geometry import body_rotation_error, matrix_from_quat, quat_from_matrix
+from ...models import make_model
+from ...models.shooting import ShootingModel
+from ...params import ModelParameters
+from ..compare import Predictions, calibration_poses
+from .measurements import tip_sensor_offset_in_tip_m, tip_sensor_position_in_base_m
+from .split import Split
+
+# A candidate starts at the baseline's optimum: a few dozen evaluations converge it; a
+# fit that needs more is chasing a parameter the data barely sees.
+CANDIDATE_MAX_EVALUATIONS = 40
+BASELINE_MAX_EVALUATIONS = 100
+# Fits stop once a step gains less than this fraction of the cost: at a good fit (chi^2 ~
+# the number of residual rows, ~600) that is 1e-3 in chi^2, far below the score
+# differences that decide (ln n ~ 6 per parameter). calibrate's own 1e-10 costs 40 % more
+# evaluations for digits nobody reads.
+COST_TOLERANCE = 1e-6
+# A base that tilts less than this over a session is clamped (tracker noise is ~0.7 deg
+# per sample, ~0.1 deg per averaged step).
+STATIC_BASE_DEG = 2.0
+
+
+@dataclass(frozen=True)
+class Fit:
+    """One model fitted to the training steps.
+
+    effect: the candidate's name, None for the baseline. names/values/standard_errors:
+    the fitted parameters. params: the calibrated parameters. predictions: every step of
+    the session along its path; sensor_positions_m: the tip sensor's predicted position
+    there (N, 3), base frame. training_chi2: sum of squared training residual rows over
+    the per-axis noise variance; training_rows: their number. error: why the fit failed
+    (then predictions is None and the candidate is ranked last).
+    """
+
+    effect: str | None
+    names: tuple[str, ...]
+    values: np.ndarray
+    standard_errors: np.ndarray
+    params: ModelParameters | None
+    predictions: Predictions | None
+    sensor_positions_m: np.ndarray | None
+    training_chi2: float
+    training_rows: int
+    evaluations: int
+    unidentifiable: tuple[tuple[str, str, float], ...] = ()
+    error: str | None = None
+
+    @property
+    def parameter_count(self) -> int:
+        return len(self.names)
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Everything a fit needs: the session's steps, the split, gravity in the base frame
+    per step (m/s^2, see `session_gravity`), the model family and the baseline's effects,
+    the initial parameters, the residual weighting."""
+
+    steps: Dataset
+    split: Split
+    gravity_in_base_m_s2: np.ndarray
+    model_name: str
+    baseline_effects: tuple[Effect, ...]
+    known_names: tuple[str, ...]
+    initial: ModelParameters
+    orientation_sigma_rad: float
+    position_weight_rad_per_m: float
+
+    def model(self, candidate: Effect | None = None) -> ShootingModel:
+        """The baseline's model, plus ``candidate`` when it is not already part of it."""
+        effects = self.baseline_effects
+        if candidate is not None and all(effect.name != candidate.name for effect in effects):
+            effects = effects + (candidate,)
+        return make_model(self.model_name, effects)
+
+    def names(self, candidate: Effect | None = None) -> tuple[str, ...]:
+        extra = () if candidate is None else qualified_parameter_names(candidate)
+        return DEFAULT_NAMES + self.known_names + tuple(name for name in extra if name not in self.known_names)
+
+
+def session_gravity(steps: Dataset) -> np.ndarray:
+    """(N, 3) gravity in the base frame for each step: their mean when the base is static
+    (see the module docstring), else each step's own."""
+    gravity = steps.gravity_in_base_m_s2()
+    mean = gravity.mean(axis=0)
+    cosine = gravity @ mean / (np.linalg.norm(gravity, axis=1) * np.linalg.norm(mean))
+    if np.degrees(np.arccos(np.clip(cosine.min(), -1.0, 1.0))) <= STATIC_BASE_DEG:
+        return np.tile(mean, (len(steps), 1))
+    return gravity
+
+
+def predict_path(model: ShootingModel, params: ModelParameters, steps: Dataset,
+                 gravity_in_base_m_s2: np.ndarray) -> tuple[Predictions, np.ndarray]:
+    """Every step in recorded order, each solve carrying the previous one's path state,
+    with the calibrated (constant) disturbance: `compare.predict` with a given gravity.
+    Also returns the tip sensor's position (N, 3), base frame, m."""
+    offset = np.array(tip_sensor_offset_in_tip_m(steps))
+    orientations = np.empty((len(steps), 4))
+    positions = np.empty((len(steps), 3))
+    sensor_positions = np.empty((len(steps), 3))
+    bends = np.empty(len(steps))
+    shared: dict[tuple[float, ...], ModelParameters] = {}
+    previous = None
+    for row, jets in enumerate(steps.jet_forces_n):
+        gravity = tuple(gravity_in_base_m_s2[row])
+        # One parameter object per gravity lets the model reuse its packed problem.
+        row_params = shared.setdefault(gravity, replace(params, gravity_in_base_m_s2=gravity))
+        previous = model.solve(jets, row_params, previous=previous)
+        orientations[row] = quat_from_matrix(previous.tip_sensor_in_base_sensor())
+        positions[row] = previous.tip_position_in_base_m
+        sensor_positions[row] = previous.tip_position_in_base_m + previous.tip_rotation_in_base @ offset
+        bends[row] = previous.bend_angle_deg
+    moments = np.tile(np.asarray(params.disturbance.moment_nm, dtype=float), (len(steps), 1))
+    return Predictions(orientations, positions, bends, moments), sensor_positions
+
+
+def training_poses(problem: Problem) -> list[CalibrationPose]:
+    """The solved prefix of the session as calibration poses, with the session's gravity
+    and the tip sensor's own position."""
+    steps = problem.steps
+    rows = np.flatnonzero(problem.split.solved)
+    positions = tip_sensor_position_in_base_m(steps)
+    offset = tip_sensor_offset_in_tip_m(steps)
+    return [replace(pose, gravity_in_base_m_s2=tuple(problem.gravity_in_base_m_s2[row]),
+                    tip_position_in_base_sensor_m=None if positions is None else positions[row],
+                    position_offset_in_tip_m=offset)
+            for pose, row in zip(calibration_poses(steps.select(rows)), rows)]
+
+
+def fit(problem: Problem, candidate: Effect | None = None, start: ModelParameters | None = None,
+        max_evaluations: int = BASELINE_MAX_EVALUATIONS) -> Fit:
+    """Calibrate the baseline (or baseline + ``candidate``) on the training steps from
+    ``start`` (default: the initial parameters), then predict the whole session."""
+    model = problem.model(candidate)
+    names = problem.names(candidate)
+    split = problem.split
+    label = None if candidate is None else candidate.name
+    try:
+        result = calibrate(model, training_poses(problem), start or problem.initial, names,
+                           position_weight_rad_per_m=problem.position_weight_rad_per_m,
+                           max_evaluations=max_evaluations, follow_path=True, cost_tolerance=COST_TOLERANCE,
+                           fitted=split.training[split.solved])
+        predictions, sensor_positions = predict_path(model, result.params, problem.steps,
+                                                     problem.gravity_in_base_m_s2)
+    except (ConvergenceError, ValueError) as error:
+        # A candidate pushed to where the model cannot solve explains nothing; the baseline
+        # failing is the caller's problem.
+        if candidate is None:
+            raise
+        nothing = np.full(len(names), np.nan)
+        return Fit(label, names, nothing, nothing, None, None, None, np.inf, 0, 0, error=str(error))
+    chi2, rows = training_chi2(problem, predictions, sensor_positions)
+    return Fit(label, names, result.values, result.standard_errors, result.params, predictions, sensor_positions,
+               chi2, rows, result.evaluations, result.unidentifiable)
+
+
+def residual_rows(problem: Problem, predictions: Predictions, sensor_positions_m: np.ndarray,
+                  mask: np.ndarray) -> np.ndarray:
+    """(n, 3 or 6) residual rows of the masked steps: orientation rotation vectors (rad),
+    then weighted tip sensor position errors when measured (see the module docstring)."""
+    steps = problem.steps
+    rotation = body_rotation_error(matrix_from_quat(predictions.tip_orientation_in_base[mask]),
+                                   matrix_from_quat(steps.tip_orientation_in_base()[mask]))
+    measured = tip_sensor_position_in_base_m(steps)
+    if measured is None or problem.position_weight_rad_per_m == 0.0:
+        return rotation
+    offset = sensor_positions_m[mask] - measured[mask]
+    return np.hstack([rotation, problem.position_weight_rad_per_m * offset])
+
+
+def training_chi2(problem: Problem, predictions: Predictions, sensor_positions_m: np.ndarray) -> tuple[float, int]:
+    rows = residual_rows(problem, predictions, sensor_positions_m, problem.split.training)
+    return float(np.sum(rows**2) / problem.orientation_sigma_rad**2), int(rows.size)
+
+
+# --- candidates, in parallel ----------------------------------------------------------
+
+# What the worker processes fit: set before they are forked, so they inherit it (effects
+# loaded from user files included) instead of receiving it pickled.
+_WORK: tuple[Problem, tuple[Effect, ...], ModelParameters] | None = None
+
+
+def _fit_candidate(index: int) -> Fit:
+    assert _WORK is not None
+    problem, candidates, start = _WORK
+    return fit(problem, candidates[index], start, CANDIDATE_MAX_EVALUATIONS)
+
+
+def default_workers() -> int:
+    """Processes for the candidate fits: up to 2, the CPUs there are (the bench machine
+    has two; more would only contend with the bench itself)."""
+    return min(2, os.cpu_count() or 1)
+
+
+def fit_candidates(problem: Problem, candidates: Sequence[Effect], baseline: Fit, workers: int | None = None,
+                   progress: Callable[[Fit], None] | None = None) -> list[Fit]:
+    """Fit every candidate from the baseline's calibration; returns the fits in
+    candidate order.
+
+    workers: processes (default `default_workers`); 1 fits in this process, as does a
+    platform without fork.
+    """
+    global _WORK
+    if baseline.params is None:
+        raise ValueError("the baseline fit failed; no candidate can start from it")
+    count = len(candidates)
+    workers = min(count, workers if workers is not None else default_workers())
+    # Most parameters first: the slowest fits should not start last.
+    order = sorted(range(count), key=lambda index: -len(candidates[index].parameters))
+    results: list[Fit | None] = [None] * count
+    parallel = workers > 1 and "fork" in multiprocessing.get_all_start_methods()
+    _WORK = (problem, tuple(candidates), baseline.params)
+    try:
+        with (ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) if parallel
+              else nullcontext()) as pool:
+            fits = pool.map(_fit_candidate, order) if parallel else map(_fit_candidate, order)
+            for index, result in zip(order, fits):
+                results[index] = result
+                if progress:
+                    progress(result)
+    finally:
+        _WORK = None
+    return results  # type: ignore[return-value]

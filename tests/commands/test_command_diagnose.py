@@ -1,0 +1,68 @@
+"""`hydrojet-bench diagnose` through the command line: the JSON schema, the report, exit
+codes and clear errors. A short plan keeps it quick; the statistics of the verdicts are
+tested in tests/analysis/test_analysis_diagnose.py."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from hydrojet_bench.cli import main
+from hydrojet_bench.data.csv_io import write_csv
+from hydrojet_bench.plans import calibration_plan, validation_sweeps
+from hydrojet_bench.profile import load_profile
+from hydrojet_bench.twin import DigitalTwin, TwinConfig
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """A short session (20 poses, each jet swept twice in 11 steps) with jet 3 at 85 %."""
+    profile = load_profile("sim")
+    twin = DigitalTwin(TwinConfig.from_profile(profile, hidden_effects=("jet_gain",),
+                                               hidden_effect_values=(("jet_gain.gain_3", 0.85),), seed=3))
+    plan = calibration_plan(20) + validation_sweeps(0.1, steps_up=5, repetitions=2)
+    path = tmp_path_factory.mktemp("diagnose") / "twin.csv"
+    write_csv(twin.run_plan(plan).to_dataset(profile, "short twin"), path)
+    return path
+
+
+def test_json_and_report_name_the_hidden_jet_gain(recorded, tmp_path, capsys):
+    out = tmp_path / "diagnosis.json"
+    report = tmp_path / "report"
+    assert main(["diagnose", str(recorded), "--model", "cosserat", "--candidate", "jet_gain", "--candidate",
+                 "gravity", "--candidate", "sensor_mounting", "--json", str(out), "--report", str(report)]) == 0
+    document = json.loads(out.read_text())
+    assert document["verdict"] == "jet_gain"
+    assert isinstance(document["noise_floor_deg"], float) and document["noise_floor_deg"] > 0.0
+    assert [entry["effect"] for entry in document["ranking"]][0] == "jet_gain"
+    assert {entry["effect"] for entry in document["ranking"]} == {"jet_gain", "gravity", "sensor_mounting"}
+    for entry in document["ranking"]:
+        for key in ("heldout_orientation_rmse_deg", "explained_fraction", "score"):
+            assert isinstance(entry[key], float), key
+    baseline = document["baseline"]
+    assert baseline["heldout_orientation_rmse_deg"] > 2.0 * document["noise_floor_deg"]
+    assert set(document["evidence"]) == {"loading_unloading", "online_disturbance_correlation",
+                                         "residual_correlation", "rmse_by_jet_deg"}
+    assert document["noise"]["method"] == "repeatability"
+    assert document["split"]["held_out_sweeps"] == [3, 4, 5]
+    assert sorted(p.name for p in report.iterdir()) == ["diagnose_ranking.png", "diagnose_signature.png"]
+    printed = " ".join(capsys.readouterr().out.split())  # as one line, whatever the terminal's width
+    assert "verdict: jet_gain" in printed and "--effect jet_gain -o after.toml" in printed
+
+
+def test_user_mistakes_give_one_clear_line_and_exit_code_2(recorded, tmp_path, capsys):
+    for args, message in (
+        (["--effect", "warp_drive"], "unknown effect 'warp_drive'"),
+        (["--candidate", "warp_drive"], "unknown effect 'warp_drive'"),
+        (["--candidate", f"{tmp_path / 'nowhere.py'}:Effect"], "nowhere.py does not exist"),
+        (["--workers", "0"], "--workers must be at least 1"),
+        (["--effect", "jet_gain", "--candidate", "jet_gain"], "already a known effect"),
+    ):
+        # main() turns a UserError into one line on stderr and exit code 2; anything else
+        # would propagate and fail the test.
+        assert main(["diagnose", str(recorded), *args]) == 2, args
+        error = " ".join(capsys.readouterr().err.split())
+        assert message in error, error
+    assert main(["diagnose", str(tmp_path / "missing.csv")]) == 2
+    assert "missing.csv" in capsys.readouterr().err
