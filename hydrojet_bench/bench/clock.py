@@ -17,7 +17,10 @@ from typing import Protocol, runtime_checkable
 
 @runtime_checkable
 class Clock(Protocol):
-    """Session seconds since the clock started."""
+    """Session seconds since the clock started; ``time_scale`` session seconds pass per
+    wall second (waits in wall time, such as a driver's, divide by it)."""
+
+    time_scale: float
 
     def now(self) -> float: ...
 

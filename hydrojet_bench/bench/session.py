@@ -111,7 +111,6 @@ class SessionStatus:
     step_index: int = -1
     step: PlanStep | None = None
     session_time_s: float = 0.0
-    wall_start_s: float = field(default_factory=time.monotonic)
     remaining_session_s: float = 0.0
     ref_error_deg: float | None = None
     online_error_deg: float | None = None
@@ -259,7 +258,7 @@ class Session:
         for address, calibration in ((imu.base_address, imu.base_calibration),
                                      (imu.tip_address, imu.tip_calibration)):
             driver = Icm20948(bus, address, clock=self.clock.now, calibration=calibration,
-                              sleep=lambda seconds: time.sleep(seconds / self.clock_scale))
+                              sleep=lambda seconds: time.sleep(seconds / self.clock.time_scale))
             chip = AsyncIcm20948(driver, bus_lock=lock)
             await chip.initialize()
             if imu.gyro_bias_samples:
@@ -268,10 +267,6 @@ class Session:
         self.event("info", "imu", f"ICM-20948 at {imu.base_address:#04x} and {imu.tip_address:#04x} ready")
         return chips[0], chips[1], ImuPairFusion(imu.rate_hz, gain=imu.madgwick_gain,
                                                  use_magnetometer=imu.use_magnetometer)
-
-    @property
-    def clock_scale(self) -> float:
-        return getattr(self.clock, "time_scale", 1.0)
 
     # --- streams --------------------------------------------------------------------
 

@@ -16,6 +16,7 @@ import shlex
 import signal
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +55,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..bench.plan_choice import choose_plan
-    from ..bench.session import Session, SessionRequest
+    from ..bench.session import SessionRequest
     from ..bench.settings import bench_settings
 
     profile = load_profile(args.profile)
@@ -64,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"--time-scale must be > 0, got {args.time_scale}")
         if not settings.transports.simulated and args.time_scale != 1.0:
             raise UserError("--time-scale applies to the simulated rig only; this profile drives real devices")
-        settings = _with_time_scale(settings, args.time_scale)
+        settings = replace(settings, timing=replace(settings.timing, time_scale=args.time_scale))
     plan = choose_plan(args.plan, settle_s=settings.timing.settle_s)
     model_name = args.model or settings.estimator.model
     effect_specs = list(settings.estimator.effects) + args.effect
@@ -89,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     console.print(f"session on [bold]{profile.name}[/] ({'simulated rig' if settings.transports.simulated else 'rig'}): "
                   f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.timing.time_scale:g}, "
                   f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; log {log_path}")
-    result = asyncio.run(_run_session(Session, request, console, live=not args.no_live and console.is_terminal))
+    result = asyncio.run(_run_session(request, console, live=not args.no_live and console.is_terminal))
     if result is None:
         console.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {log_path}")
         return 143
@@ -97,14 +98,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _with_time_scale(settings, time_scale: float):
-    from dataclasses import replace
-
-    return replace(settings, timing=replace(settings.timing, time_scale=time_scale))
-
-
-async def _run_session(session_class, request, console: Console, live: bool):
+async def _run_session(request, console: Console, live: bool):
     from ..bench.live_view import LiveView
+    from ..bench.session import Session
 
     terminated = False
     task = asyncio.current_task()
@@ -121,7 +117,7 @@ async def _run_session(session_class, request, console: Console, live: bool):
     try:
         with view_context as view:
             on_update = view.update if live else _printer(console)
-            session = session_class(request, on_update=on_update)
+            session = Session(request, on_update=on_update)
             return await session.run()
     except asyncio.CancelledError:
         if terminated:
