@@ -6,7 +6,7 @@ model; `StaticPlant` holds sensors still, for tests and standalone emulators.
 
 Frames: "world" is the EM tracker's frame. Orientations are unit quaternions
 (w, x, y, z) mapping sensor-frame vectors into the world frame (see
-`hydrojet_bench.geometry`).
+`drivers.rotations`).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from hydrojet_bench.geometry import quat_normalize
+from drivers.rotations import quat_normalize
 
 VALVE_COUNT = 3
 

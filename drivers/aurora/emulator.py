@@ -59,7 +59,7 @@ from drivers.aurora.replies import (
 )
 from drivers.aurora.stream import CommandSplitter
 from drivers.plant import Plant
-from hydrojet_bench.geometry import quat_from_rotvec, quat_multiply, quat_normalize
+from drivers.rotations import quat_from_rotvec, quat_multiply, quat_normalize
 
 FRAME_RATE_HZ = 40.0  # Aurora measurement rate
 DEFAULT_BAUD = 9600  # after power-up, a break or RESET

@@ -2,7 +2,7 @@
 
 Frames: poses are in the tracker ("world") frame of the field generator; orientation is
 a unit quaternion (w, x, y, z) mapping sensor-frame vectors into the tracker frame (the
-convention of `hydrojet_bench.geometry`), position in millimetres.
+convention of `drivers.rotations`), position in millimetres.
 """
 
 from __future__ import annotations

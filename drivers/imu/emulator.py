@@ -40,7 +40,7 @@ import numpy as np
 from drivers.imu import registers as reg
 from drivers.imu.codec import ImuRanges, Vector3, encode_ak09916_block, encode_mag_counts, encode_motion
 from drivers.plant import Plant
-from hydrojet_bench.geometry import matrix_from_quat
+from drivers.rotations import matrix_from_quat
 
 Matrix3 = tuple[Vector3, Vector3, Vector3]
 

@@ -5,7 +5,7 @@ Checked against the installed ahrs: `Madgwick(frequency=..., gain=...)`,
 rad/s, accelerometer and magnetometer used only by direction; quaternions scalar-first.
 Its earth frame has z up (a resting accelerometer reads +z) and x along the horizontal
 part of the magnetic field; its quaternion maps sensor-frame vectors into that frame,
-the same convention as `hydrojet_bench.geometry`.
+the same convention as `drivers.rotations`.
 
 The filter corrects only at rate `gain` (rad/s), so starting from identity a 30 degree
 tilt would take ~10 s to converge; the first sample instead sets the orientation from
@@ -20,7 +20,7 @@ import numpy as np
 from ahrs.filters import Madgwick
 
 from drivers.imu.calibration import ImuSample
-from hydrojet_bench.geometry import quat_conjugate, quat_from_matrix, quat_multiply, quat_normalize
+from drivers.rotations import quat_conjugate, quat_from_matrix, quat_multiply, quat_normalize
 
 # ahrs' default MARG gain (Madgwick's beta), rad/s.
 DEFAULT_GAIN = 0.041
