@@ -60,6 +60,7 @@ from drivers.aurora.replies import (
 from drivers.aurora.stream import CommandSplitter
 from drivers.plant import Plant
 from drivers.rotations import quat_from_rotvec, quat_multiply, quat_normalize
+from drivers.transport.handler import EmulatorHandler
 
 FRAME_RATE_HZ = 40.0  # Aurora measurement rate
 DEFAULT_BAUD = 9600  # after power-up, a break or RESET
@@ -117,7 +118,7 @@ def _parse_handle(params: str) -> int:
         raise _DeviceError(ErrorCode.INVALID_PORT_HANDLE) from None
 
 
-class AuroraEmulator:
+class AuroraEmulator(EmulatorHandler):
     """An Aurora system control unit with wired sensors ``tools`` (handle -> plant
     sensor name). Thread-safe: servers call it from their own thread while tests and the
     bench flip faults.

@@ -14,7 +14,7 @@ from collections.abc import Callable, Mapping
 
 from drivers.aurora.emulator import ORIENTATION_NOISE_DEG, POSITION_NOISE_MM, AuroraEmulator
 from drivers.plant import Plant
-from drivers.transport import PtyServer
+from drivers.transport.pty import PtyServer
 
 
 def serve_pty(

@@ -1,34 +1,17 @@
-"""Async byte transports chosen by URL, plus the emulator-side servers.
+"""Async byte transports chosen by URL.
 
-Client side: ``t = open_transport(url); await t.open(); await t.write(b); await t.read()``
-for ``serial://``, ``pty://`` (or a bare path) and ``sim://NAME`` URLs; `FaultyTransport`
-wraps any of them to inject line faults. Emulator side: `PtyServer` (a pty + thread) and
-`serve_sim`/`register_device` (in-process). Timeouts are the caller's job.
+``t = open_transport(url); await t.open(); await t.write(b); await t.read()`` for
+``serial://``, ``pty://`` (or a bare path) and ``sim://NAME`` URLs (`drivers.transport.url`).
+Timeouts are the caller's job. Importing this package loads no transport: each is imported
+when a URL of its scheme is opened.
+
+Emulator side, imported from their modules: `drivers.transport.handler.EmulatorHandler`
+(the base class of every emulator), `drivers.transport.pty.PtyServer` (serve one on a pty
+from a thread) and `drivers.transport.sim` (`serve_sim`, `register_device`: in-process).
+Test doubles (scripted mock, fault injection) live in `drivers.testing`.
 """
 
 from drivers.transport.base import Transport, TransportClosed, TransportError
-from drivers.transport.faults import FaultyTransport
-from drivers.transport.handler import EmulatorHandler
-from drivers.transport.mock import ScriptedTransport, ScriptMismatch
-from drivers.transport.pty import PtyPair, PtyServer
-from drivers.transport.serial_link import SerialTransport
-from drivers.transport.sim import SimTransport, register_device, serve_sim, unregister_device
 from drivers.transport.url import open_transport
 
-__all__ = [
-    "EmulatorHandler",
-    "FaultyTransport",
-    "PtyPair",
-    "PtyServer",
-    "ScriptMismatch",
-    "ScriptedTransport",
-    "SerialTransport",
-    "SimTransport",
-    "Transport",
-    "TransportClosed",
-    "TransportError",
-    "open_transport",
-    "register_device",
-    "serve_sim",
-    "unregister_device",
-]
+__all__ = ["Transport", "TransportClosed", "TransportError", "open_transport"]

@@ -1,18 +1,8 @@
 """What an emulator must offer to be served over a pty or an in-process sim link.
 
-An emulator is a byte-level state machine. Required:
-
-* ``receive(data: bytes) -> bytes``: bytes the host wrote (any split, any garbage);
-  returns the bytes the device sends back (may be b"").
-
-Optional (looked up with ``getattr``):
-
-* ``poll() -> bytes``: called periodically by the server (every ``poll_interval_s``)
-  even when the host is silent, for time-driven behaviour (watchdogs, streaming);
-  returns unsolicited bytes to send.
-* ``on_break() -> bytes``: the host held a serial break (sim links only: a pty cannot
-  convey a break).
-* ``on_baudrate(baud: int) -> None``: the host changed its line rate (sim links only).
+An emulator is a byte-level state machine deriving from `EmulatorHandler`. It must
+implement ``receive``; the other hooks default to doing nothing, so an emulator overrides
+only the events its device reacts to.
 
 Servers may call a handler from a thread of their own, so an emulator that is also
 touched from elsewhere (tests, the bench) must lock its state.
@@ -20,17 +10,24 @@ touched from elsewhere (tests, the bench) must lock its state.
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from abc import ABC, abstractmethod
 
 
-@runtime_checkable
-class EmulatorHandler(Protocol):
+class EmulatorHandler(ABC):
+    @abstractmethod
     def receive(self, data: bytes) -> bytes:
-        """Bytes from the host in, bytes to the host out."""
-        ...
+        """Bytes the host wrote (any split, any garbage) in; the bytes the device sends
+        back out (may be b"")."""
 
+    def poll(self) -> bytes:
+        """Called by the server every ``poll_interval_s`` even when the host is silent,
+        for time-driven behaviour (watchdogs, streaming); returns unsolicited bytes."""
+        return b""
 
-def poll_handler(handler: EmulatorHandler) -> bytes:
-    """Call ``handler.poll()`` if it has one; returns the unsolicited bytes (or b"")."""
-    poll = getattr(handler, "poll", None)
-    return poll() if poll is not None else b""
+    def on_break(self) -> bytes:
+        """The host held a serial break (sim links only: a pty cannot convey a break);
+        returns the bytes the device sends in response."""
+        return b""
+
+    def on_baudrate(self, baud: int) -> None:
+        """The host changed its line rate to ``baud`` bit/s (sim links only)."""

@@ -22,7 +22,7 @@ import time
 import tty
 from types import TracebackType
 
-from drivers.transport.handler import EmulatorHandler, poll_handler
+from drivers.transport.handler import EmulatorHandler
 
 # Replies held back while the client is not reading; beyond this they are dropped.
 _MAX_OUTBOX_BYTES = 1 << 20
@@ -142,7 +142,7 @@ class PtyServer:
                             self._send(reply)
                 now = time.monotonic()
                 if now >= next_poll:
-                    out = poll_handler(self.handler)
+                    out = self.handler.poll()
                     if out:
                         self._send(out)
                     next_poll = now + self.poll_interval_s

@@ -11,27 +11,55 @@ from __future__ import annotations
 import asyncio
 import errno
 import os
+from urllib.parse import parse_qsl, urlsplit
 
 import serial
 
 from drivers.transport.base import TransportClosed, TransportError
+from drivers.transport.buffered import BufferedTransport
 
+DEFAULT_BAUD = 115200
+_URL_PARAMETERS = ("baud", "parity", "stopbits")
 # Stop reading from the kernel once this much is buffered and unread: the kernel's own
 # buffer then fills and the line applies back-pressure, as a real UART would overrun.
 _MAX_BUFFERED_BYTES = 1 << 20
 _PEER_GONE_ERRNOS = {errno.EIO, errno.ENXIO, errno.EBADF, errno.ENODEV, errno.EPIPE}
 
 
-class SerialTransport:
+def _line_settings(url: str, query: str) -> dict[str, object]:
+    """The baud/parity/stopbits of a URL query; ValueError names a bad parameter."""
+    options: dict[str, object] = {}
+    for key, value in parse_qsl(query, keep_blank_values=True, strict_parsing=False):
+        if key not in _URL_PARAMETERS:
+            raise ValueError(
+                f"unknown query parameter {key!r} in transport URL {url!r}; "
+                f"known: {', '.join(_URL_PARAMETERS)}"
+            )
+        if key == "baud":
+            if not value.isdigit() or int(value) <= 0:
+                raise ValueError(f"baud must be a positive integer, got {value!r} in {url!r}")
+            options["baud"] = int(value)
+        elif key == "parity":
+            if value.upper() not in ("N", "E", "O"):
+                raise ValueError(f"parity must be N, E or O, got {value!r} in {url!r}")
+            options["parity"] = value.upper()
+        else:
+            if value not in ("1", "2"):
+                raise ValueError(f"stopbits must be 1 or 2, got {value!r} in {url!r}")
+            options["stopbits"] = int(value)
+    return options
+
+
+class SerialTransport(BufferedTransport):
     """A serial device (``serial:///dev/ttyUSB0``) or pty slave (``pty:///dev/pts/7``).
 
     baud: line rate in bit/s. parity: "N", "E" or "O". stopbits: 1 or 2.
     """
 
     def __init__(
-        self, url: str, port: str, baud: int = 115200, parity: str = "N", stopbits: int = 1
+        self, url: str, port: str, baud: int = DEFAULT_BAUD, parity: str = "N", stopbits: int = 1
     ) -> None:
-        self.url = url
+        super().__init__(url)
         self.port = port
         self.baud = baud
         self.parity = parity
@@ -39,11 +67,24 @@ class SerialTransport:
         self._serial: serial.Serial | None = None
         self._fd: int | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._buffer = bytearray()
-        self._readable = asyncio.Event()
         self._reading = False
         self._eof = False
-        self._closed = False
+
+    @classmethod
+    def from_url(cls, url: str) -> SerialTransport:
+        """``serial:///dev/X?baud=..&parity=..&stopbits=..``, ``pty:///dev/pts/N?...`` or a
+        bare absolute device path (115200 8N1); ValueError names the offending part."""
+        if url.startswith("/"):
+            return cls(url, url)
+        parts = urlsplit(url)
+        if parts.netloc:
+            raise ValueError(
+                f"{parts.scheme} URL {url!r} has host part {parts.netloc!r}; "
+                f"write {parts.scheme}:///dev/... (three slashes)"
+            )
+        if not parts.path or parts.path == "/":
+            raise ValueError(f"{parts.scheme} URL {url!r} has no device path")
+        return cls(url, parts.path, **_line_settings(url, parts.query))  # type: ignore[arg-type]
 
     async def open(self) -> None:
         if self._serial is not None:
@@ -62,9 +103,8 @@ class SerialTransport:
         self._fd = ser.fileno()
         os.set_blocking(self._fd, False)
         self._loop = asyncio.get_running_loop()
-        self._readable = asyncio.Event()  # bound to the loop that opened the port
-        self._closed = False
         self._eof = False
+        self._start_buffering()
         self._start_reading()
 
     def _start_reading(self) -> None:
@@ -89,33 +129,20 @@ class SerialTransport:
         if not data:
             self._eof = True
             self._stop_reading()
-        else:
-            self._buffer += data
-            if len(self._buffer) >= _MAX_BUFFERED_BYTES:
-                self._stop_reading()
-        self._readable.set()
+            self._peer_gone("peer hung up (EOF)")
+            return
+        self._deliver(data)
+        if len(self._buffer) >= _MAX_BUFFERED_BYTES:
+            self._stop_reading()
 
-    async def read(self, max_bytes: int = 4096) -> bytes:
-        if max_bytes < 1:
-            raise ValueError(f"max_bytes must be >= 1, got {max_bytes}")
-        while True:
-            if self._closed or self._serial is None:
-                raise TransportClosed(f"{self.url}: transport is closed")
-            if self._buffer:
-                chunk = bytes(self._buffer[:max_bytes])
-                del self._buffer[:max_bytes]
-                if not self._eof:
-                    self._start_reading()
-                return chunk
-            if self._eof:
-                raise TransportClosed(f"{self.url}: peer hung up (EOF)")
-            self._readable.clear()
-            await self._readable.wait()
+    def _bytes_taken(self) -> None:
+        if not self._eof:
+            self._start_reading()
 
     async def write(self, data: bytes) -> None:
         view = memoryview(bytes(data))
         while view:
-            if self._closed or self._fd is None:
+            if self._fd is None:
                 raise TransportClosed(f"{self.url}: transport is closed")
             try:
                 written = os.write(self._fd, view)
@@ -163,14 +190,11 @@ class SerialTransport:
             raise TransportError(f"{self.url}: break failed: {exc}") from exc
 
     async def close(self) -> None:
-        if self._serial is None:
-            self._closed = True
-            return
         self._stop_reading()
+        self._stop_buffering()
+        if self._serial is None:
+            return
         ser, self._serial, self._fd = self._serial, None, None
-        self._closed = True
-        self._buffer.clear()
-        self._readable.set()  # wake a waiting reader so it raises TransportClosed
         try:
             ser.close()
         except (serial.SerialException, OSError):

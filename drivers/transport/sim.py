@@ -17,9 +17,11 @@ import asyncio
 import contextlib
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
+from urllib.parse import urlsplit
 
-from drivers.transport.base import TransportClosed, TransportError
-from drivers.transport.handler import EmulatorHandler, poll_handler
+from drivers.transport.base import TransportError
+from drivers.transport.buffered import BufferedTransport
+from drivers.transport.handler import EmulatorHandler
 
 
 @dataclass
@@ -50,7 +52,7 @@ def unregister_device(name: str) -> None:
     device = _devices.pop(name, None)
     if device is not None:
         for link in list(device.links):
-            link._peer_gone()
+            link._unregistered()
 
 
 def registered_devices() -> list[str]:
@@ -61,7 +63,7 @@ def poll_device(name: str) -> None:
     """Run one ``poll()`` of the named device and deliver its output to open links."""
     device = _devices.get(name)
     if device is not None:
-        out = poll_handler(device.handler)
+        out = device.handler.poll()
         if out:
             device.broadcast(out)
 
@@ -89,16 +91,23 @@ async def serve_sim(
         unregister_device(name)
 
 
-class SimTransport:
+class SimTransport(BufferedTransport):
     """Client end of an in-process link to a registered emulator."""
 
     def __init__(self, url: str, name: str) -> None:
-        self.url = url
+        super().__init__(url)
         self.name = name
         self._device: _SimDevice | None = None
-        self._buffer = bytearray()
-        self._readable: asyncio.Event | None = None
-        self._peer_closed = False
+
+    @classmethod
+    def from_url(cls, url: str) -> SimTransport:
+        """``sim://NAME``; raises ValueError naming the offending part."""
+        parts = urlsplit(url)
+        if not parts.netloc:
+            raise ValueError(f"sim URL {url!r} has no device name (sim://NAME)")
+        if parts.path not in ("", "/") or parts.query:
+            raise ValueError(f"sim URL {url!r} must be just sim://NAME, no path or query")
+        return cls(url, parts.netloc)
 
     async def open(self) -> None:
         if self._device is not None:
@@ -110,26 +119,16 @@ class SimTransport:
                 f"(registered: {registered_devices()})"
             )
         self._device = device
-        self._readable = asyncio.Event()
-        self._buffer.clear()
-        self._peer_closed = False
+        self._start_buffering()
         device.links.add(self)
 
-    def _deliver(self, data: bytes) -> None:
-        self._buffer += data
-        if self._readable is not None:
-            self._readable.set()
-
-    def _peer_gone(self) -> None:
-        self._peer_closed = True
+    def _unregistered(self) -> None:
         self._device = None
-        if self._readable is not None:
-            self._readable.set()
+        self._peer_gone("device was unregistered")
 
     def _require_open(self) -> _SimDevice:
-        if self._device is None:
-            reason = "device was unregistered" if self._peer_closed else "transport is closed"
-            raise TransportClosed(f"{self.url}: {reason}")
+        self._raise_if_ended()
+        assert self._device is not None  # only an ended link has no device
         return self._device
 
     async def write(self, data: bytes) -> None:
@@ -140,41 +139,21 @@ class SimTransport:
         # Yield once, as a real write would, so a tight write loop cannot starve readers.
         await asyncio.sleep(0)
 
-    async def read(self, max_bytes: int = 4096) -> bytes:
-        if max_bytes < 1:
-            raise ValueError(f"max_bytes must be >= 1, got {max_bytes}")
-        while True:
-            if self._buffer:
-                chunk = bytes(self._buffer[:max_bytes])
-                del self._buffer[:max_bytes]
-                return chunk
-            self._require_open()
-            assert self._readable is not None
-            self._readable.clear()
-            await self._readable.wait()
-
     async def set_baudrate(self, baud: int) -> None:
-        device = self._require_open()
-        hook = getattr(device.handler, "on_baudrate", None)
-        if hook is not None:
-            hook(baud)
+        self._require_open().handler.on_baudrate(baud)
 
     async def send_break(self, duration_s: float = 0.25) -> None:
         device = self._require_open()
         await asyncio.sleep(duration_s)
-        hook = getattr(device.handler, "on_break", None)
-        if hook is not None:
-            reply = hook()
-            if reply:
-                self._deliver(reply)
+        reply = device.handler.on_break()
+        if reply:
+            self._deliver(reply)
 
     async def close(self) -> None:
         if self._device is not None:
             self._device.links.discard(self)
         self._device = None
-        self._buffer.clear()
-        if self._readable is not None:
-            self._readable.set()
+        self._stop_buffering()
 
     def __repr__(self) -> str:
         return f"SimTransport({self.url!r})"

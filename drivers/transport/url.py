@@ -1,4 +1,4 @@
-"""Transport URLs -> unopened `Transport` objects.
+"""Transport URLs -> unopened `Transport` objects, by scheme.
 
 * ``serial:///dev/ttyUSB0?baud=115200&parity=N&stopbits=1`` - a serial port (pyserial).
 * ``pty:///dev/pts/7?baud=9600`` or a bare ``/dev/pts/7`` - a pty slave (an emulator),
@@ -9,37 +9,25 @@
 
 from __future__ import annotations
 
-from urllib.parse import parse_qsl, urlsplit
+import importlib
+from urllib.parse import urlsplit
 
 from drivers.transport.base import Transport
-from drivers.transport.serial_link import SerialTransport
-from drivers.transport.sim import SimTransport
 
-DEFAULT_BAUD = 115200
-_SERIAL_PARAMS = ("baud", "parity", "stopbits")
+# scheme -> "module:Class". The module is imported only when a URL of its scheme is
+# opened, so a bench on sim links never loads pyserial. Each class parses its own URL
+# with ``Class.from_url(url)``, raising ValueError naming the offending part.
+TRANSPORTS: dict[str, str] = {
+    "serial": "drivers.transport.serial_link:SerialTransport",
+    "pty": "drivers.transport.serial_link:SerialTransport",
+    "sim": "drivers.transport.sim:SimTransport",
+}
+# A bare absolute path is a device node: a serial port or a pty slave.
+_BARE_PATH_SCHEME = "serial"
 
 
-def _serial_options(url: str, query: str) -> dict[str, object]:
-    options: dict[str, object] = {}
-    for key, value in parse_qsl(query, keep_blank_values=True, strict_parsing=False):
-        if key not in _SERIAL_PARAMS:
-            raise ValueError(
-                f"unknown query parameter {key!r} in transport URL {url!r}; "
-                f"known: {', '.join(_SERIAL_PARAMS)}"
-            )
-        if key == "baud":
-            if not value.isdigit() or int(value) <= 0:
-                raise ValueError(f"baud must be a positive integer, got {value!r} in {url!r}")
-            options["baud"] = int(value)
-        elif key == "parity":
-            if value.upper() not in ("N", "E", "O"):
-                raise ValueError(f"parity must be N, E or O, got {value!r} in {url!r}")
-            options["parity"] = value.upper()
-        else:
-            if value not in ("1", "2"):
-                raise ValueError(f"stopbits must be 1 or 2, got {value!r} in {url!r}")
-            options["stopbits"] = int(value)
-    return options
+def _schemes() -> str:
+    return ", ".join(f"{scheme}://" for scheme in TRANSPORTS)
 
 
 def open_transport(url: str) -> Transport:
@@ -49,32 +37,19 @@ def open_transport(url: str) -> Transport:
     """
     if not isinstance(url, str) or not url:
         raise ValueError(f"transport URL must be a non-empty string, got {url!r}")
-    if "://" not in url:
-        if url.startswith("/"):
-            return SerialTransport(url, url, DEFAULT_BAUD)
+    if "://" in url:
+        scheme = urlsplit(url).scheme.lower()
+    elif url.startswith("/"):
+        scheme = _BARE_PATH_SCHEME
+    else:
         raise ValueError(
-            f"transport URL {url!r} has no scheme; use serial://, pty://, sim:// "
-            "or an absolute device path"
+            f"transport URL {url!r} has no scheme; use {_schemes()} or an absolute device path"
         )
-    parts = urlsplit(url)
-    scheme = parts.scheme.lower()
-    if scheme in ("serial", "pty"):
-        if parts.netloc:
-            raise ValueError(
-                f"{scheme} URL {url!r} has host part {parts.netloc!r}; "
-                f"write {scheme}:///dev/... (three slashes)"
-            )
-        if not parts.path or parts.path == "/":
-            raise ValueError(f"{scheme} URL {url!r} has no device path")
-        options = _serial_options(url, parts.query)
-        return SerialTransport(url, parts.path, **options)  # type: ignore[arg-type]
-    if scheme == "sim":
-        if not parts.netloc:
-            raise ValueError(f"sim URL {url!r} has no device name (sim://NAME)")
-        if parts.path not in ("", "/") or parts.query:
-            raise ValueError(f"sim URL {url!r} must be just sim://NAME, no path or query")
-        return SimTransport(url, parts.netloc)
-    raise ValueError(
-        f"unsupported transport scheme {parts.scheme!r} in {url!r}; "
-        "use serial://, pty:// or sim://"
-    )
+    target = TRANSPORTS.get(scheme)
+    if target is None:
+        raise ValueError(
+            f"unsupported transport scheme {scheme!r} in {url!r}; use {_schemes()}"
+        )
+    module_name, class_name = target.split(":")
+    transport: Transport = getattr(importlib.import_module(module_name), class_name).from_url(url)
+    return transport

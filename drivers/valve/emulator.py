@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable
 
 from drivers.plant import Plant
+from drivers.transport.handler import EmulatorHandler
 from drivers.valve.protocol import (
     DEFAULT_WATCHDOG_MS,
     FIRMWARE_VERSION,
@@ -46,7 +47,7 @@ from drivers.valve.protocol import (
 _RX_ERRORS_MAX = 0xFFFF
 
 
-class ValveEmulator:
+class ValveEmulator(EmulatorHandler):
     """plant: receives duty changes. clock: seconds, monotonic (virtual time welcome).
     watchdog_s: silence (s) after which an armed device closes all valves and latches
     the WATCHDOG fault; the firmware holds it in whole milliseconds (1..65535)."""

@@ -11,7 +11,7 @@ import threading
 from collections.abc import Callable
 
 from drivers.plant import Plant, StaticPlant
-from drivers.transport import PtyServer
+from drivers.transport.pty import PtyServer
 from drivers.valve.emulator import ValveEmulator
 from drivers.valve.protocol import DEFAULT_WATCHDOG_MS
 

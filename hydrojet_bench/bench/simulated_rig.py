@@ -22,7 +22,7 @@ from typing import Any
 from drivers.aurora.emulator import AuroraEmulator
 from drivers.imu.emulator import Icm20948BusEmulator
 from drivers.plant import SensorTruth
-from drivers.transport import PtyServer
+from drivers.transport.pty import PtyServer
 from drivers.transport.sim import serve_sim
 from drivers.valve.emulator import ValveEmulator
 

@@ -15,7 +15,8 @@ from drivers.aurora.emulator import AuroraEmulator
 from drivers.aurora.frames import decode_bx
 from drivers.aurora.replies import decode_reply
 from drivers.plant import StaticPlant
-from drivers.transport import PtyServer, serve_sim
+from drivers.transport.pty import PtyServer
+from drivers.transport.sim import serve_sim
 from hydrojet_bench.geometry import quat_from_rotvec
 
 # Base tilted and offset, tip bent away: every quaternion component and axis matters.

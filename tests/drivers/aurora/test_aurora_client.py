@@ -26,7 +26,8 @@ from drivers.aurora.commands import Command
 from drivers.aurora.frames import HandleStatus, ToolRecord, TrackingFrame, Transform, encode_bx
 from drivers.aurora.replies import ErrorReply, OkayReply, encode_payload, encode_reply
 from drivers.plant import StaticPlant
-from drivers.transport import FaultyTransport, ScriptedTransport, open_transport
+from drivers.testing import FaultyTransport, ScriptedTransport
+from drivers.transport import open_transport
 from drivers.transport.sim import unregister_device
 from hydrojet_bench.geometry import rotation_angle_deg
 

@@ -19,7 +19,7 @@ import pytest
 from aurora_testkit import HANDLES, truth_mm
 
 from drivers.aurora import AuroraEmulator
-from drivers.transport import PtyServer
+from drivers.transport.pty import PtyServer
 from hydrojet_bench.geometry import rotation_angle_deg
 
 pytestmark = pytest.mark.skipif(

@@ -1,8 +1,5 @@
-"""Helpers of the IMU tests: a virtual clock and the MOCK bus (scripted transactions).
-
-The mock is kept apart from the simulation (emulator + plant): it knows nothing about the
-chip, it only checks that the driver issues exactly the scripted transactions in order
-and hands back the scripted replies (or raises the scripted OSError).
+"""Helpers of the IMU tests: a virtual clock and the driver's start-up transactions as a
+script for the mock bus (`drivers.testing.ScriptedBus`).
 
 (Named uniquely because tests/drivers/imu has no __init__.py: a tests/drivers/imu
 package would shadow the real `drivers.imu` under pytest's default import mode.)
@@ -10,12 +7,7 @@ package would shadow the real `drivers.imu` under pytest's default import mode.)
 
 from __future__ import annotations
 
-import errno
-import os
-from collections.abc import Iterable
-from typing import Any
-
-Call = tuple[Any, ...]
+from drivers.testing.scripted_bus import R, Step, W
 
 
 class VirtualClock:
@@ -34,70 +26,7 @@ class VirtualClock:
         self.now_s += duration_s
 
 
-def nack() -> OSError:
-    return OSError(errno.EREMOTEIO, os.strerror(errno.EREMOTEIO))
-
-
-def eio() -> OSError:
-    return OSError(errno.EIO, os.strerror(errno.EIO))
-
-
-# Script steps: (call, reply). Builders for readability.
-def W(address: int, register: int, value: int) -> tuple[Call, Any]:
-    return ("write_byte_data", address, register, value), None
-
-
-def R(address: int, register: int, reply: int | BaseException) -> tuple[Call, Any]:
-    return ("read_byte_data", address, register), reply
-
-
-def B(address: int, register: int, length: int, reply: bytes | BaseException) -> tuple[Call, Any]:
-    return ("read_i2c_block_data", address, register, length), reply
-
-
-def F(step: tuple[Call, Any], error: BaseException) -> tuple[Call, Any]:
-    """The same call, answered with an exception."""
-    return step[0], error
-
-
-class ScriptedBus:
-    """An SMBus stand-in that asserts the exact sequence of transactions."""
-
-    def __init__(self, script: Iterable[tuple[Call, Any]]) -> None:
-        self.script = list(script)
-        self.position = 0
-        self.calls: list[Call] = []
-
-    def _next(self, call: Call) -> Any:
-        self.calls.append(call)
-        assert self.position < len(self.script), f"unscripted transaction after the script ended: {call}"
-        expected, reply = self.script[self.position]
-        assert call == expected, f"transaction {self.position}: expected {expected}, got {call}"
-        self.position += 1
-        if isinstance(reply, BaseException):
-            raise reply
-        return reply
-
-    def read_byte_data(self, i2c_addr: int, register: int) -> int:
-        return self._next(("read_byte_data", i2c_addr, register))
-
-    def write_byte_data(self, i2c_addr: int, register: int, value: int) -> None:
-        self._next(("write_byte_data", i2c_addr, register, value))
-
-    def read_i2c_block_data(self, i2c_addr: int, register: int, length: int) -> list[int]:
-        return list(self._next(("read_i2c_block_data", i2c_addr, register, length)))
-
-    def i2c_rdwr(self, *messages: Any) -> None:
-        self._next(("i2c_rdwr", tuple((m.addr, m.flags, len(m)) for m in messages)))
-
-    def assert_done(self) -> None:
-        assert self.position == len(self.script), (
-            f"script not finished: {len(self.script) - self.position} transaction(s) left, "
-            f"next {self.script[self.position][0] if self.position < len(self.script) else None}"
-        )
-
-
-def init_script(address: int = 0x68) -> list[tuple[Call, Any]]:
+def init_script(address: int = 0x68) -> list[Step]:
     """Every transaction of `Icm20948.initialize()` with the default settings (ranges
     +-4 g / +-500 dps, divider 10, DLPF 3), written out in plain numbers from the
     datasheet rather than from the driver's constants. SLV4 completes at the 2nd poll."""

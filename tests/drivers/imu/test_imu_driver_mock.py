@@ -6,7 +6,7 @@ import errno
 import struct
 
 import pytest
-from imu_test_support import B, F, R, ScriptedBus, VirtualClock, W, eio, init_script, nack
+from imu_test_support import VirtualClock, init_script
 
 from drivers.imu.driver import Icm20948
 from drivers.imu.errors import (
@@ -17,6 +17,7 @@ from drivers.imu.errors import (
     ImuNotFoundError,
     ImuProtocolError,
 )
+from drivers.testing import B, F, R, ScriptedBus, W, eio, nack
 
 
 def make(bus: ScriptedBus, address: int = 0x68, **kwargs: object) -> tuple[Icm20948, VirtualClock]:

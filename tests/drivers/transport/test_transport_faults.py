@@ -6,11 +6,13 @@ import asyncio
 
 import pytest
 
-from drivers.transport import FaultyTransport, ScriptedTransport, ScriptMismatch, TransportClosed, open_transport
+from drivers.testing import FaultyTransport, ScriptedTransport, ScriptMismatch
+from drivers.transport import TransportClosed, open_transport
+from drivers.transport.handler import EmulatorHandler
 from drivers.transport.sim import register_device, unregister_device
 
 
-class Echo:
+class Echo(EmulatorHandler):
     def __init__(self) -> None:
         self.received = bytearray()
 

@@ -9,10 +9,12 @@ import time
 
 import pytest
 
-from drivers.transport import PtyPair, PtyServer, TransportClosed, TransportError, open_transport
+from drivers.transport import TransportClosed, TransportError, open_transport
+from drivers.transport.handler import EmulatorHandler
+from drivers.transport.pty import PtyPair, PtyServer
 
 
-class Echo:
+class Echo(EmulatorHandler):
     def __init__(self) -> None:
         self.received = bytearray()
         self.polls = 0
@@ -145,7 +147,7 @@ def test_close_wakes_a_blocked_reader(run_async) -> None:
 
 
 def test_handler_exception_is_reraised_by_stop(run_async) -> None:
-    class Broken:
+    class Broken(EmulatorHandler):
         def receive(self, data: bytes) -> bytes:
             raise RuntimeError("emulator bug")
 

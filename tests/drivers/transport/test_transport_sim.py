@@ -6,11 +6,12 @@ import asyncio
 
 import pytest
 
-from drivers.transport import TransportClosed, TransportError, open_transport, serve_sim
-from drivers.transport.sim import poll_device, register_device, registered_devices, unregister_device
+from drivers.transport import TransportClosed, TransportError, open_transport
+from drivers.transport.handler import EmulatorHandler
+from drivers.transport.sim import poll_device, register_device, registered_devices, serve_sim, unregister_device
 
 
-class Recorder:
+class Recorder(EmulatorHandler):
     """Upper-cases input; counts polls and emits one tick byte per poll if asked."""
 
     def __init__(self, tick: bytes = b"") -> None:

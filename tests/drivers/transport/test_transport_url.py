@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from drivers.transport import SerialTransport, SimTransport, open_transport
+from drivers.transport import open_transport
+from drivers.transport.serial_link import SerialTransport
+from drivers.transport.sim import SimTransport
 
 
 def test_serial_url_with_options() -> None:

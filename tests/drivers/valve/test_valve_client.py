@@ -8,7 +8,9 @@ import asyncio
 import pytest
 
 from valve_backends import emulator_backend, every_backend
-from drivers.transport import ScriptedTransport, TransportClosed
+from drivers.testing import ScriptedTransport
+from drivers.transport import TransportClosed
+from drivers.transport.handler import EmulatorHandler
 from drivers.transport.sim import register_device, unregister_device
 from drivers.valve import (
     JetCalibration,
@@ -192,12 +194,12 @@ def test_bad_arguments_raise_value_error_without_touching_the_device(run_async, 
 # ------------------------------------------------------------------ unresponsive devices
 
 
-class Silent:
+class Silent(EmulatorHandler):
     def receive(self, data: bytes) -> bytes:
         return b""
 
 
-class AlwaysNak:
+class AlwaysNak(EmulatorHandler):
     def __init__(self, code: NakCode) -> None:
         self.code = code
         self.frames = 0

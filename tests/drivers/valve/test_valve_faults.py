@@ -16,7 +16,9 @@ from pathlib import Path
 import pytest
 
 from drivers.plant import StaticPlant
-from drivers.transport import FaultyTransport, PtyServer, TransportClosed, open_transport
+from drivers.testing import FaultyTransport
+from drivers.transport import TransportClosed, open_transport
+from drivers.transport.pty import PtyServer
 from drivers.valve import ValveController, ValveError, ValveFaultError
 from drivers.valve.emulator import ValveEmulator
 from valve_backends import emulator_backend, every_backend

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 import pytest
 
 from drivers.plant import StaticPlant
-from drivers.transport import PtyServer, serve_sim
+from drivers.transport.pty import PtyServer
+from drivers.transport.sim import serve_sim
 from drivers.valve.emulator import ValveEmulator
 
 _names = itertools.count()

@@ -11,14 +11,14 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Iterable
 
-from drivers.transport.base import TransportClosed
+from drivers.transport.buffered import BufferedTransport
 
 
 class ScriptMismatch(AssertionError):
     """The client wrote bytes the script did not expect."""
 
 
-class ScriptedTransport:
+class ScriptedTransport(BufferedTransport):
     """script: (expected bytes written by the client, reply bytes) pairs, in order.
 
     The client may write an expected message in any number of pieces; the reply is
@@ -26,27 +26,20 @@ class ScriptedTransport:
     """
 
     def __init__(self, script: Iterable[tuple[bytes, bytes]], url: str = "mock://scripted") -> None:
-        self.url = url
+        super().__init__(url)
         self._script = [(bytes(w), bytes(r)) for w, r in script]
         self._step = 0
         self._written = bytearray()
-        self._buffer = bytearray()
-        self._readable: asyncio.Event | None = None
-        self._open = False
         self.written_log: list[bytes] = []
 
     async def open(self) -> None:
-        self._open = True
-        self._readable = asyncio.Event()
+        self._start_buffering()
 
     async def close(self) -> None:
-        self._open = False
-        if self._readable is not None:
-            self._readable.set()
+        self._stop_buffering()
 
     async def write(self, data: bytes) -> None:
-        if not self._open:
-            raise TransportClosed(f"{self.url}: transport is closed")
+        self._raise_if_ended()
         self.written_log.append(bytes(data))
         self._written += data
         while self._written:
@@ -66,27 +59,14 @@ class ScriptedTransport:
             del self._written[: len(expected)]
             self._step += 1
             if reply:
-                self._buffer += reply
-                assert self._readable is not None
-                self._readable.set()
+                self._deliver(reply)
         await asyncio.sleep(0)
 
-    async def read(self, max_bytes: int = 4096) -> bytes:
-        while True:
-            if self._buffer:
-                chunk = bytes(self._buffer[:max_bytes])
-                del self._buffer[:max_bytes]
-                return chunk
-            if not self._open or self._readable is None:
-                raise TransportClosed(f"{self.url}: transport is closed")
-            self._readable.clear()
-            await self._readable.wait()
-
     async def set_baudrate(self, baud: int) -> None:
-        pass
+        self._raise_if_ended()
 
     async def send_break(self, duration_s: float = 0.25) -> None:
-        pass
+        self._raise_if_ended()
 
     @property
     def steps_done(self) -> int:
