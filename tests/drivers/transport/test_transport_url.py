@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import pytest
 
 from drivers.transport import open_transport
@@ -49,3 +52,18 @@ def test_sim_url() -> None:
 def test_bad_urls_raise_value_error_naming_the_part(url: str, names: str) -> None:
     with pytest.raises(ValueError, match=names):
         open_transport(url)
+
+
+def test_transports_are_imported_only_when_their_scheme_is_opened() -> None:
+    """A sim-only process never loads pyserial, the pty server or the test doubles."""
+    probe = (
+        "import sys\n"
+        "from drivers.transport import open_transport\n"
+        "open_transport('sim://x')\n"
+        "print(sorted(m for m in ('serial', 'drivers.transport.serial_link', 'drivers.transport.pty',"
+        " 'drivers.testing') if m in sys.modules))\n"
+        "open_transport('serial:///dev/ttyUSB0')\n"
+        "print('serial' in sys.modules)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, timeout=60)
+    assert result.stdout.split("\n")[:2] == ["[]", "True"]
