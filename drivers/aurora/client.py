@@ -66,7 +66,7 @@ class AuroraTracker:
     """An Aurora system control unit seen through a transport.
 
     target: a transport URL (``serial:///dev/ttyUSB0``, ``/dev/pts/7``, ``sim://aurora``)
-        or an unopened `Transport` (e.g. wrapped in a FaultyTransport).
+        or an unopened `Transport` (e.g. wrapped in a `drivers.testing.FaultyTransport`).
     tool_names: None -> ``tool_0A``-style names; a sequence -> names given to the enabled
         handles in ascending handle order (the port order of a wired Aurora); a mapping
         name -> handle -> exactly those handles (an error if one is absent).

@@ -2,8 +2,8 @@
 
 It speaks the protocol of `drivers.aurora.commands/replies/frames` byte for byte, so the
 real host library (ndicapi / scikit-surgerynditracker) and our own client both drive it.
-Serve it with `drivers.transport.PtyServer` (a pty a serial client opens) or
-`drivers.transport.serve_sim` (in-process ``sim://NAME``); see also `drivers.aurora.serve`.
+Serve it with `drivers.transport.pty.PtyServer` (a pty a serial client opens) or
+`drivers.transport.sim.serve_sim` (in-process ``sim://NAME``); see also `drivers.aurora.serve`.
 
 Modes, as on the device: after power-up or a break the system is not initialised and
 talks at 9600 baud; INIT initialises it (and un-initialises every port handle, so a new

@@ -33,14 +33,17 @@ class Transport(Protocol):
         ...
 
     async def write(self, data: bytes) -> None:
-        """Send all of ``data``; raises TransportClosed if the peer is gone."""
+        """Send all of ``data``; raises TransportClosed if the peer is gone or the
+        transport is closed."""
         ...
 
     async def read(self, max_bytes: int = 4096) -> bytes:
         """Wait for at least one byte and return 1..max_bytes bytes.
 
-        Raises TransportClosed on EOF/hang-up or when the transport is closed while
-        waiting. Never returns b"".
+        Raises TransportClosed on EOF/hang-up or when the transport is closed, also
+        while waiting; ValueError if ``max_bytes`` < 1. Never returns b"" and never
+        times out by itself. tests/drivers/transport/test_transport_contract.py checks
+        this contract on every transport.
         """
         ...
 
