@@ -31,3 +31,11 @@ class EmulatorHandler(ABC):
 
     def on_baudrate(self, baud: int) -> None:
         """The host changed its line rate to ``baud`` bit/s (sim links only)."""
+
+
+def require_handler(handler: object) -> EmulatorHandler:
+    """``handler`` itself; TypeError now if it is not an `EmulatorHandler`, rather than an
+    AttributeError later from a server's thread or poll task."""
+    if not isinstance(handler, EmulatorHandler):
+        raise TypeError(f"{handler!r} is not an EmulatorHandler: derive the emulator from it")
+    return handler

@@ -22,7 +22,7 @@ import time
 import tty
 from types import TracebackType
 
-from drivers.transport.handler import EmulatorHandler
+from drivers.transport.handler import EmulatorHandler, require_handler
 
 # Replies held back while the client is not reading; beyond this they are dropped.
 _MAX_OUTBOX_BYTES = 1 << 20
@@ -95,7 +95,7 @@ class PtyServer:
     ) -> None:
         if poll_interval_s <= 0:
             raise ValueError(f"poll_interval_s must be > 0, got {poll_interval_s}")
-        self.handler = handler
+        self.handler = require_handler(handler)
         self.poll_interval_s = poll_interval_s
         self._pty = PtyPair()
         self.path = self._pty.path

@@ -21,7 +21,7 @@ from urllib.parse import urlsplit
 
 from drivers.transport.base import TransportError
 from drivers.transport.buffered import BufferedTransport
-from drivers.transport.handler import EmulatorHandler
+from drivers.transport.handler import EmulatorHandler, require_handler
 
 
 @dataclass
@@ -44,7 +44,7 @@ def register_device(name: str, handler: EmulatorHandler) -> None:
         raise ValueError("sim device name must not be empty")
     if name in _devices:
         raise ValueError(f"sim device {name!r} is already registered")
-    _devices[name] = _SimDevice(name, handler)
+    _devices[name] = _SimDevice(name, require_handler(handler))
 
 
 def unregister_device(name: str) -> None:

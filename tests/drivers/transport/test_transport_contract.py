@@ -168,3 +168,4 @@ def test_use_after_close_raises_transport_closed_and_close_is_idempotent(link: L
                 await transport.read()
 
     run_async(main)
+

@@ -188,3 +188,12 @@ def test_pty_pair_survives_no_client() -> None:
     finally:
         pair.close()
         pair.close()
+
+
+def test_server_refuses_a_handler_that_is_not_an_emulator_handler() -> None:
+    class DuckTyped:
+        def receive(self, data: bytes) -> bytes:
+            return data
+
+    with pytest.raises(TypeError, match="EmulatorHandler"):
+        PtyServer(DuckTyped())  # type: ignore[arg-type]

@@ -127,3 +127,13 @@ def test_poll_output_goes_to_every_open_link(run_async) -> None:
             unregister_device("t-sim-5")
 
     run_async(main)
+
+
+def test_register_refuses_a_handler_that_is_not_an_emulator_handler() -> None:
+    class DuckTyped:
+        def receive(self, data: bytes) -> bytes:
+            return data
+
+    with pytest.raises(TypeError, match="EmulatorHandler"):
+        register_device("t-sim-6", DuckTyped())  # type: ignore[arg-type]
+    assert "t-sim-6" not in registered_devices()
