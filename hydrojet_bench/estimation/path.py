@@ -130,18 +130,17 @@ class PathPredictor:
     def __init__(self, model: ShootingModel, params: ModelParameters, online: OnlineSettings | None = None) -> None:
         self.model = model
         self.params = params
-        self.online_settings = online
         self._estimator = OnlineDisturbanceEstimator(model, params, online) if online is not None else None
         self._ref_params = params
         self._previous_ref: Solution | None = None
-        self.count = 0
+        self._count = 0
 
     def step(self, jet_forces_n: np.ndarray, measured_tip_in_base: np.ndarray, gravity_in_base_m_s2: np.ndarray,
              measured_tip_position_in_base_m: np.ndarray | None = None) -> StepPrediction:
         """Predict the next step: jet forces (N), the measured tip orientation in the base
         frame (w, x, y, z), gravity in the base frame then (m/s^2) and, when measured, the
-        tip position in the base frame (m). Raises `ConvergenceError` if the model does
-        not converge (the path state then stays at the last step that did)."""
+        tip position in the base frame (m). Raises `ConvergenceError` when the model does
+        not converge on it."""
         gravity = tuple(gravity_in_base_m_s2)
         if gravity != self._ref_params.gravity_in_base_m_s2:
             # Kept while gravity stays the same, so the model can reuse its packed problem.
@@ -152,12 +151,13 @@ class PathPredictor:
                           measured_tip_position_in_base_m)
         online = before = iterations = None
         if self._estimator is not None:
-            result = self._estimator.update(jet_forces_n, measured_tip_in_base, gravity_in_base_m_s2=gravity_in_base_m_s2)
+            result = self._estimator.update(jet_forces_n, measured_tip_in_base,
+                                            gravity_in_base_m_s2=gravity_in_base_m_s2)
             online = _prediction(ONLINE, result.solution, result.disturbance_moment_nm, measured_tip_in_base,
                                  measured_tip_position_in_base_m)
             before, iterations = result.error_before_deg, result.iterations
-        record = StepPrediction(self.count, ref, online, np.array(self.params.disturbance.force_n), before, iterations)
-        self.count += 1
+        record = StepPrediction(self._count, ref, online, np.array(self.params.disturbance.force_n), before, iterations)
+        self._count += 1
         return record
 
     def predict(self, steps: Dataset, gravity_in_base_m_s2: np.ndarray | None = None) -> list[StepPrediction]:
