@@ -277,3 +277,9 @@ def body_rotation_error(rotation_estimated: ArrayLike, rotation_measured: ArrayL
     r_est = np.asarray(rotation_estimated, dtype=float)
     r_meas = np.asarray(rotation_measured, dtype=float)
     return so3_log(np.swapaxes(r_est, -1, -2) @ r_meas)
+
+
+def position_error_mm(predicted_m: ArrayLike, measured_m: ArrayLike) -> FloatArray:
+    """Distance (mm) between predicted and measured positions given in m, one (3,) pair
+    or stacks ``(..., 3)``: the paper's ||epsilon||_2."""
+    return np.linalg.norm(np.asarray(predicted_m, dtype=float) - np.asarray(measured_m, dtype=float), axis=-1) * 1e3

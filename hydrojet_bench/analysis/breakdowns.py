@@ -28,8 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..data.dataset import Dataset
+from ..estimation.path import Predictions
 from ..geometry import body_rotation_error, matrix_from_quat
-from .compare import Comparison, Predictions, measured_bend_deg
+from .compare import Comparison, measured_bend_deg
 from .metrics import ErrorSummary, bend_bin_labels, bend_bin_names, breakdown, summarise
 
 SECTOR_WIDTH_DEG = 60.0

@@ -1,11 +1,12 @@
-"""Errors between predicted and measured tip poses, and their RMS breakdowns.
+"""RMS summaries of the errors between predicted and measured tip poses, and their
+breakdowns.
 
 Orientation error: the angle (deg) of the rotation between the predicted and the measured
-tip-relative-to-base orientation (sensor frames). Position error: the Euclidean distance
-(mm) between predicted and measured tip positions in the base sensor frame (the paper's
-||epsilon||_2). Breakdowns group samples by sweep and by bending angle, the latter in
-the bins of the paper's Table II, labelled by their upper edges 10, 25, 50 and 75
-degrees (bends beyond 75 degrees form a last bin).
+tip-relative-to-base orientation (`geometry.rotation_angle_deg`). Position error: the
+Euclidean distance (mm) between predicted and measured tip positions in the base frame
+(`geometry.position_error_mm`, the paper's ||epsilon||_2). Breakdowns group samples by
+sweep and by bending angle, the latter in the bins of the paper's Table II, labelled by
+their upper edges 10, 25, 50 and 75 degrees (bends beyond 75 degrees form a last bin).
 """
 
 from __future__ import annotations
@@ -14,8 +15,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
-from ..geometry import rotation_angle_deg
 
 BEND_BIN_EDGES_DEG: tuple[float, ...] = (10.0, 25.0, 50.0, 75.0)
 
@@ -32,16 +31,6 @@ class ErrorSummary:
 
     def as_dict(self) -> dict:
         return {key: getattr(self, key) for key in self.__dataclass_fields__}
-
-
-def orientation_errors_deg(predicted_quaternions: np.ndarray, measured_quaternions: np.ndarray) -> np.ndarray:
-    """Per-sample angle (deg) between predicted and measured orientations (N, 4)."""
-    return np.asarray(rotation_angle_deg(predicted_quaternions, measured_quaternions), dtype=float)
-
-
-def position_errors_mm(predicted_m: np.ndarray, measured_m: np.ndarray) -> np.ndarray:
-    """Per-sample distance (mm) between predicted and measured positions (N, 3), in m."""
-    return np.linalg.norm(np.asarray(predicted_m) - np.asarray(measured_m), axis=-1) * 1e3
 
 
 def summarise(orientation_deg: np.ndarray, position_mm: np.ndarray | None = None) -> ErrorSummary:

@@ -43,13 +43,13 @@ import numpy as np
 from ..data.dataset import Dataset, average_quaternions
 from ..errors import UserError
 from ..estimation.online import OnlineSettings
+from ..estimation.path import ONLINE, PathPredictor, Predictions
 from ..geometry import quat_conjugate, quat_from_rotvec, quat_multiply, rotation_angle_deg, rotvec_from_quat
 from ..models.shooting import ShootingModel
 from ..params import ModelParameters
 from ..profile import RigProfile
 from .breakdowns import drift
-from .compare import Comparison, compare, predict
-from .metrics import orientation_errors_deg
+from .compare import Comparison, compare, compare_methods
 
 # Gravity in the Madgwick filter's earth frame (z up), m/s^2 (drivers/imu/fusion.py).
 IMU_EARTH_GRAVITY_M_S2 = (0.0, 0.0, -9.81)
@@ -165,7 +165,7 @@ def orientation_difference(aligned: AlignedOrientations) -> OrientationDifferenc
     vector = np.degrees(rotvec_from_quat(quat_multiply(aligned.imu, quat_conjugate(aligned.em))))
     heading = np.sum(vector * aligned.up_in_base, axis=1)
     tilt = np.linalg.norm(vector - heading[:, None] * aligned.up_in_base, axis=1)
-    return OrientationDifference(orientation_errors_deg(aligned.imu, aligned.em), vector, heading, tilt)
+    return OrientationDifference(rotation_angle_deg(aligned.imu, aligned.em), vector, heading, tilt)
 
 
 @dataclass(frozen=True)
@@ -427,9 +427,9 @@ def compare_estimators(model: ShootingModel, params: ModelParameters, em_steps: 
     validation = em_steps.sweep >= 0
     if validation.any():
         em_steps, imu_steps = em_steps.select(validation), imu_steps.select(validation)
-    results = {"ref": compare(predict(model, params, em_steps), em_steps),
-               "online_em": compare(predict(model, params, em_steps, online), em_steps),
-               "online_imu": compare(predict(model, params, imu_steps, online), em_steps)}
+    on_em = compare_methods(model, params, em_steps, online)
+    fed_by_imu = Predictions.along(PathPredictor(model, params, online).predict(imu_steps), ONLINE)
+    results = {"ref": on_em["ref"], "online_em": on_em["online"], "online_imu": compare(fed_by_imu, em_steps)}
     return EstimatorComparison(em_steps, results)
 
 

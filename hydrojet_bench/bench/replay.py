@@ -3,7 +3,7 @@
 A log holds every settled step (``/bench/step``: the averaged sensor poses, as
 `Dataset.quasistatic_steps` rows), the parameters the live estimator used and when
 (``/bench/parameters``: the starting ones, then the calibrated ones) and the live
-predictions (``/model/prediction``). `replay` feeds the steps through `StepEstimation` as
+predictions (``/model/prediction``). `replay` feeds the steps through a `PathPredictor` as
 the session did, switching parameters at the same points, so with the live model and
 settings it reproduces the live estimates exactly; with another model, effects or
 parameters it answers "what would this model have done on that session".
@@ -20,16 +20,20 @@ import numpy as np
 from ..data.dataset import Dataset
 from ..errors import ConvergenceError, UserError
 from ..estimation.online import OnlineSettings
+from ..estimation.path import PathPredictor, StepPrediction
 from ..logs import read_log
 from ..logs.dataset import rig_profile_of_log
 from ..models.shooting import ShootingModel
 from ..params import ModelParameters, with_parameters
 from ..profile import RigProfile
-from .live_estimation import StepEstimate, StepEstimation
 
 STEP_TOPIC = "/bench/step"
 PARAMETERS_TOPIC = "/bench/parameters"
 PREDICTION_TOPIC = "/model/prediction"
+
+
+class NoSettledSteps(UserError):
+    """The log holds no settled steps: it was not written by a bench session."""
 
 
 @dataclass(frozen=True)
@@ -63,7 +67,8 @@ def read_session(path: Path, profile: RigProfile | str | Path | None = None) -> 
     rig = rig_profile_of_log(path, profile, contents.metadata)
     records = contents.on(STEP_TOPIC)
     if not records:
-        raise UserError(f"{path}: no settled steps ({STEP_TOPIC}) in this log; was it written by `hydrojet-bench run`?")
+        raise NoSettledSteps(f"{path}: no settled steps ({STEP_TOPIC}) in this log; "
+                             "was it written by `hydrojet-bench run`?")
     data = [record.data for record in records]
     with_positions = all(row.get("base_position_m") is not None for row in data)
 
@@ -89,29 +94,39 @@ def read_session(path: Path, profile: RigProfile | str | Path | None = None) -> 
                          parameters, live, contents.truncated)
 
 
+def logged_steps(path: Path, profile: RigProfile | str | Path | None = None) -> Dataset | None:
+    """The settled steps of a session log, the rows its live estimator predicted (None
+    when the log has none)."""
+    try:
+        return read_session(path, profile).steps
+    except NoSettledSteps:
+        return None
+
+
 def replay(session: LoggedSession, model: ShootingModel, online: OnlineSettings | None,
-           params: ModelParameters | None = None) -> list[StepEstimate | None]:
-    """Estimates for every settled step (None where the model did not converge, as live).
+           params: ModelParameters | None = None) -> list[StepPrediction | None]:
+    """Predictions of every settled step (None where the model did not converge, as live).
 
     params: fixed parameters for every step; None follows the log's parameter timeline
-    (a fresh estimator whenever the live one was restarted with new parameters)."""
+    (a fresh predictor whenever the live one was restarted with new parameters)."""
     base = session.profile.model_parameters()
-    estimates: list[StepEstimate | None] = []
-    estimation: StepEstimation | None = None
+    predicted: list[StepPrediction | None] = []
+    predictor: PathPredictor | None = None
     current: ParameterRecord | None = None
     for row in range(len(session.steps)):
         if params is None:
             record = _record_at(session, session.step_times_s[row])
             if record is not current:
-                current, estimation = record, None
-        if estimation is None:
+                current, predictor = record, None
+        if predictor is None:
             row_params = params if params is not None else with_parameters(base, current.values)
-            estimation = StepEstimation(model, row_params, online)
+            predictor = PathPredictor(model, row_params, online)
         try:
-            estimates.append(estimation.update(session.steps.select([row])))
+            # One settled step at a time, as the session hands them over.
+            predicted.extend(predictor.predict(session.steps.select([row])))
         except ConvergenceError:
-            estimates.append(None)
-    return estimates
+            predicted.append(None)
+    return predicted
 
 
 def _record_at(session: LoggedSession, t_s: float) -> ParameterRecord:
@@ -122,7 +137,7 @@ def _record_at(session: LoggedSession, t_s: float) -> ParameterRecord:
     return earlier[-1]
 
 
-def live_difference_deg(session: LoggedSession, estimates: list[StepEstimate | None]) -> float | None:
+def live_difference_deg(session: LoggedSession, estimates: list[StepPrediction | None]) -> float | None:
     """Largest |replayed - live| orientation error over every step and method, deg (None
     if the log holds no live predictions to compare with)."""
     differences = []

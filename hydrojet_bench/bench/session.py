@@ -39,8 +39,8 @@ from drivers.valve.client import ValveController, ValveError
 from .. import __version__
 from ..data.dataset import Dataset
 from ..errors import ConvergenceError, UserError
-from ..estimation.calibration import CalibrationResult
-from ..analysis.compare import calibrate_dataset
+from ..estimation.calibration import CalibrationResult, calibrate_dataset
+from ..estimation.path import PathPredictor, StepPrediction
 from ..logs import LogWriter
 from ..models.shooting import ShootingModel
 from ..effects import effect_values
@@ -49,7 +49,6 @@ from ..params import PARAMETER_NAMES, ModelParameters, get_parameter
 from ..plans import CALIBRATION_SWEEP, Plan, PlanStep
 from ..profile import RigProfile
 from .clock import Clock, ScaledClock
-from .live_estimation import StepEstimate, StepEstimation
 from .recorder import StepRecorder
 from .settings import BenchSettings, SIM
 from .simulated_rig import SimulatedDevices, simulated_devices
@@ -133,7 +132,7 @@ class SessionResult:
     wall_time_s: float
     params: ModelParameters
     calibration: CalibrationResult | None
-    estimates: tuple[StepEstimate, ...]
+    estimates: tuple[StepPrediction, ...]
     steps: Dataset | None
 
 
@@ -149,8 +148,8 @@ class Session:
         self.imu = StepRecorder(profile, with_positions=False, source="imu")
         self.params = request.params
         self.calibration: CalibrationResult | None = None
-        self.estimation: StepEstimation | None = None
-        self.estimates: list[StepEstimate] = []
+        self.estimation: PathPredictor | None = None
+        self.estimates: list[StepPrediction] = []
         self.settled_rows: list[Dataset] = []
         self._calibration_rows: list[Dataset] = []
         self._log: LogWriter | None = None
@@ -438,10 +437,10 @@ class Session:
     async def _estimate(self, index: int, settled: Dataset, t_s: float) -> None:
         if self.estimation is None:
             online = self.request.settings.estimator.online_settings if self.request.settings.estimator.online else None
-            self.estimation = StepEstimation(self.request.model, self.params, online)
+            self.estimation = PathPredictor(self.request.model, self.params, online)
         try:
             # In a worker thread: a slow solve must never delay the valve heartbeat.
-            estimate = await asyncio.to_thread(self.estimation.update, settled)
+            (estimate,) = await asyncio.to_thread(self.estimation.predict, settled)
         except ConvergenceError as error:
             self.event("warning", "model", f"step {index}: model did not converge ({error})")
             return
@@ -451,13 +450,13 @@ class Session:
             if prediction is None:
                 continue
             log.write("/model/prediction", {
-                "t_s": t_s, "index": index, "method": prediction.method, "tip_in_base": prediction.tip_in_base,
+                "t_s": t_s, "index": index, "method": prediction.method, "tip_in_base": prediction.tip_orientation_in_base,
                 "tip_position_in_base_m": prediction.tip_position_in_base_m, "bend_deg": prediction.bend_deg,
                 "orientation_error_deg": prediction.orientation_error_deg,
                 "position_error_mm": prediction.position_error_mm}, t_s=t_s)
         best = estimate.best
         if estimate.online is not None:
-            moment = estimate.disturbance_moment_nm
+            moment = estimate.online.disturbance_moment_nm
             log.write("/estimate/disturbance", {
                 "t_s": t_s, "index": index, "force_n": estimate.disturbance_force_n, "moment_nm": moment,
                 "moment_norm_nm": float(np.linalg.norm(moment)),

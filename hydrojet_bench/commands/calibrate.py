@@ -12,10 +12,9 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from ..analysis.compare import calibrate_dataset
 from ..effects import qualified_parameter_names
 from ..errors import UserError
-from ..estimation.calibration import DEFAULT_NAMES, DEFAULT_POSITION_WEIGHT_RAD_PER_M
+from ..estimation.calibration import DEFAULT_NAMES, DEFAULT_POSITION_WEIGHT_RAD_PER_M, calibrate_dataset
 from ..params_io import ParameterFile, write_parameter_file
 from .common import add_data_arguments, add_model_arguments, build_model, load_steps
 

@@ -24,6 +24,7 @@ from ..analysis.breakdowns import (MISSING_LABEL, STRAIGHT, STRAIGHT_BELOW_DEG, 
                                    direction_order, disturbance_by_sweep, per_step)
 from ..analysis.compare import Comparison, compare_methods
 from ..analysis.metrics import ErrorSummary
+from ..bench.replay import logged_steps
 from ..data.dataset import Dataset
 from ..effects import LIBRARY, load_effect
 from ..errors import UserError
@@ -71,7 +72,10 @@ class Evaluation:
 def run(args: argparse.Namespace) -> int:
     after_file = read_parameter_file(args.params)
     before_file = None if args.baseline is None else read_parameter_file(args.baseline)
-    profile, steps = load_steps(args)
+    # A session log's own settled steps are the rows its live estimator predicted: on
+    # them, Ref. and Proposed are the live figures.
+    logged = logged_steps(args.data, args.profile) if Path(args.data).suffix.lower() == ".mcap" else None
+    profile, steps = (logged.profile, logged) if logged is not None else load_steps(args)
     validation = steps.select(steps.sweep >= 0) if (steps.sweep >= 0).any() else steps
     if len(validation) == 0:
         raise UserError(f"{args.data}: no steps to compare")

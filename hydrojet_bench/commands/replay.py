@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 
-from ..analysis.compare import calibrate_dataset, compare
+from ..analysis.compare import compare_steps
 from ..effects import qualified_parameter_names
 from ..errors import ConvergenceError, UserError
 from ..estimation import OnlineSettings
-from ..estimation.calibration import DEFAULT_NAMES
+from ..estimation.calibration import DEFAULT_NAMES, calibrate_dataset
 from ..params_io import read_parameter_file
 from .common import build_model
 
@@ -37,7 +37,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..bench.live_estimation import predictions_from_estimates
     from ..bench.replay import live_difference_deg, read_session, replay
     from .compare import print_tables
 
@@ -72,11 +71,7 @@ def run(args: argparse.Namespace) -> int:
     if not validation:
         raise UserError(f"{args.log}: the model converged on none of the logged steps")
     steps = session.steps.select(validation)
-    results = {}
-    for method in ("ref", "online"):
-        predictions = predictions_from_estimates([estimates[i] for i in validation], method)
-        if predictions is not None:
-            results[method] = compare(predictions, steps)
+    results = compare_steps([estimates[i] for i in validation], steps)
     print_tables(console, results, f"{model.name} replayed on {args.log}")
     if live_settings:
         difference = live_difference_deg(session, estimates)

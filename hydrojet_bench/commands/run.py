@@ -148,8 +148,7 @@ def _printer(console: Console):
 
 
 def _print_outcome(console: Console, result, model_name: str, args: argparse.Namespace) -> None:
-    from ..analysis.compare import compare
-    from ..bench.live_estimation import predictions_from_estimates
+    from ..analysis.compare import compare_steps
     from .compare import print_tables
 
     console.print(f"session done: {result.completed_steps}/{result.step_count} steps, "
@@ -166,11 +165,7 @@ def _print_outcome(console: Console, result, model_name: str, args: argparse.Nam
         if validation.any():
             rows = np.flatnonzero(validation)
             validation_steps = steps.select(rows)
-            results = {}
-            for key in ("ref", "online"):
-                predictions = predictions_from_estimates([estimates[i] for i in rows], key)
-                if predictions is not None:
-                    results[key] = compare(predictions, validation_steps)
+            results = compare_steps([estimates[i] for i in rows], validation_steps)
             print_tables(console, results, f"{model_name}, live session")
             if args.report:
                 from ..analysis.report import write_report

@@ -19,7 +19,6 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from ..analysis.compare import calibrate_dataset
 from ..analysis.sensors import (AXES, DEFAULT_MIN_HOLD_S, DEFAULT_SETTLE_S, METHODS, AngleSummary,
                                 EstimatorComparison, SensorAgreement, compare_estimators, imu_profile,
                                 sensor_agreement, write_sensor_report)
@@ -27,7 +26,7 @@ from ..data.dataset import Dataset
 from ..effects import qualified_parameter_names
 from ..errors import ConvergenceError, UserError
 from ..estimation import OnlineSettings
-from ..estimation.calibration import DEFAULT_NAMES
+from ..estimation.calibration import DEFAULT_NAMES, calibrate_dataset
 from ..logs import read_log
 from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log
 from ..params_io import read_parameter_file

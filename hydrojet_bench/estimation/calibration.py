@@ -41,9 +41,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..data.dataset import Dataset
 from ..effects import EffectParameter
 from ..errors import ConvergenceError
-from ..geometry import body_rotation_error
+from ..geometry import body_rotation_error, matrix_from_quat
 from ..models.shooting import ShootingModel, Solution
 from ..params import DISTURBANCE_NAMES, PARAMETER_NAMES, ModelParameters, get_parameter, with_parameters
 from ..sensitivity import DEFAULT_RELATIVE_STEP, effect_parameter, parameter_scale, sensitivity
@@ -263,6 +264,25 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         rms_orientation_deg_after=_rms_angle_deg(final, rows_per_pose),
         evaluations=int(fit.nfev),
     )
+
+
+def calibration_poses(steps: Dataset) -> list[CalibrationPose]:
+    """The dataset's rows as calibration poses (measured tip in base frame, gravity per row,
+    positions when present)."""
+    orientations = steps.tip_orientation_in_base()
+    positions = steps.tip_position_in_base_m()
+    gravity = steps.gravity_in_base_m_s2()
+    return [CalibrationPose(steps.jet_forces_n[i], matrix_from_quat(orientations[i]), tuple(gravity[i]),
+                            None if positions is None else positions[i]) for i in range(len(steps))]
+
+
+def calibrate_dataset(model: ShootingModel, steps: Dataset, initial: ModelParameters,
+                      names: Sequence[str] = DEFAULT_NAMES, **options) -> CalibrationResult:
+    """Calibrate on the dataset's calibration rows (sweep -1); ``options`` as `calibrate`."""
+    rows = steps.calibration_rows()
+    if len(rows) == 0:
+        raise ValueError(f"{steps.source or 'dataset'} has no calibration rows (sweep -1)")
+    return calibrate(model, calibration_poses(rows), initial, names, **options)
 
 
 def _default(model: ShootingModel, name: str) -> float | None:

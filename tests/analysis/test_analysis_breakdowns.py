@@ -19,7 +19,8 @@ from hypothesis import strategies as st
 from hydrojet_bench.analysis.breakdowns import (break_down, direction_labels, disturbance_by_sweep,
                                                 driving_jet_labels, drift, load_phases, loading_split,
                                                 orientation_residuals_deg, per_step, worst_poses)
-from hydrojet_bench.analysis.compare import Predictions, compare
+from hydrojet_bench.analysis.compare import compare
+from hydrojet_bench.estimation.path import Predictions
 from hydrojet_bench.data.dataset import Dataset
 from hydrojet_bench.geometry import quat_from_rotvec, quat_multiply, se3, so3_exp
 from hydrojet_bench.plans import validation_sweeps

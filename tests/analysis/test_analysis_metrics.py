@@ -7,16 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from hydrojet_bench.analysis.metrics import (bend_bin_labels, breakdown, orientation_errors_deg,
-                                             position_errors_mm, summarise)
-from hydrojet_bench.geometry import quat_from_rotvec
+from hydrojet_bench.analysis.metrics import bend_bin_labels, breakdown, summarise
+from hydrojet_bench.geometry import position_error_mm, quat_from_rotvec, rotation_angle_deg
 
 
 def test_orientation_and_position_errors():
     measured = quat_from_rotvec(np.zeros((3, 3)))
     predicted = quat_from_rotvec(np.array([[math.radians(2), 0, 0], [0, math.radians(5), 0], [0, 0, 0]]))
-    np.testing.assert_allclose(orientation_errors_deg(predicted, measured), [2.0, 5.0, 0.0], atol=1e-9)
-    np.testing.assert_allclose(position_errors_mm([[0, 0, 0.001]], [[0, 0, 0]]), [1.0])
+    np.testing.assert_allclose(rotation_angle_deg(predicted, measured), [2.0, 5.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(position_error_mm([[0, 0, 0.001]], [[0, 0, 0]]), [1.0])
+    assert position_error_mm([0.003, 0.0, 0.0], [0.0, 0.004, 0.0]) == pytest.approx(5.0)
 
 
 def test_summary_is_rms_and_sd():

@@ -15,9 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hydrojet_bench.analysis.compare import calibrate_dataset, compare, predict
+from hydrojet_bench.analysis.compare import compare_methods
 from hydrojet_bench.effects import load_effect
 from hydrojet_bench.estimation import OnlineSettings
+from hydrojet_bench.estimation.calibration import calibrate_dataset
 from hydrojet_bench.models import CosseratModel, PrbModel
 from hydrojet_bench.plans import paper_protocol
 from hydrojet_bench.profile import load_profile
@@ -52,8 +53,8 @@ def test_online_estimation_cuts_orientation_error_by_40_percent_without_worse_po
     assert len(steps) == 229
     calibration = calibrate_dataset(model, steps, PROFILE.model_parameters())
     validation = steps.select(steps.sweep >= 0)
-    reference = compare(predict(model, calibration.params, validation), validation).overall
-    online = compare(predict(model, calibration.params, validation, OnlineSettings()), validation).overall
+    results = compare_methods(model, calibration.params, validation, OnlineSettings())
+    reference, online = results["ref"].overall, results["online"].overall
     print(f"{model.name} {hidden.name} seed {seed}: Ref. {reference.orientation_rmse_deg:.2f} deg "
           f"{reference.position_rmse_mm:.2f} mm -> Proposed {online.orientation_rmse_deg:.2f} deg "
           f"{online.position_rmse_mm:.2f} mm")

@@ -46,10 +46,10 @@ from ...data.dataset import Dataset
 from ...effects import LIBRARY, Effect, load_effect, qualified_parameter_names
 from ...errors import UserError
 from ...estimation.online import OnlineSettings
+from ...geometry import rotation_angle_deg
 from ...params import ModelParameters
-from ..metrics import orientation_errors_deg
 from .evidence import (NOISE_GAP_PER_FLOOR, OnlineEvidence, cosine, hysteresis_gap_deg, online_evidence,
-                       rmse_by_jet, rotation_between, subset)
+                       rmse_by_jet, rotation_between)
 from .fitting import Fit, Problem, fit, fit_candidates, session_gravity
 from .noise import NoiseFloor, estimate_noise_floor
 from .split import Split, split_session
@@ -249,7 +249,7 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
     floor = noise.orientation_deg
 
     def heldout_rmse(result: Fit) -> float:
-        errors = orientation_errors_deg(result.predictions.tip_orientation_in_base[held_out], measured)
+        errors = rotation_angle_deg(result.predictions.tip_orientation_in_base[held_out], measured)
         return float(np.sqrt(np.mean(errors**2)))
 
     def score(result: Fit) -> float:
@@ -257,7 +257,7 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
 
     base_rmse = heldout_rmse(baseline)
     base_score = score(baseline)
-    base_held = subset(baseline.predictions, held_out)
+    base_held = baseline.predictions.select(held_out)
     residual = rotation_between(base_held.tip_orientation_in_base, measured)
     # Prediction mean square = noise x (1 + k / n) for a correct model; F test on top.
     inflation = 1.0 + baseline.parameter_count / max(baseline.training_rows, 1)
@@ -275,7 +275,7 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
                                            False, {}, None, 0.0, 0.0, result.evaluations, result.error))
             continue
         rmse = heldout_rmse(result)
-        held = subset(result.predictions, held_out)
+        held = result.predictions.select(held_out)
         signature = rotation_between(base_held.tip_orientation_in_base, held.tip_orientation_in_base)
         signatures[candidate.name] = np.degrees(signature)
         explained = (base_rmse**2 - rmse**2) / excess if excess > 0.0 else 0.0

@@ -24,23 +24,18 @@ import numpy as np
 
 from ...data.dataset import Dataset
 from ...estimation.online import OnlineSettings
-from ...geometry import body_rotation_error, matrix_from_quat
-from ...models.shooting import ShootingModel, Solution
+from ...estimation.path import ONLINE, PathPredictor, Predictions
+from ...geometry import body_rotation_error, matrix_from_quat, rotation_angle_deg
+from ...models.shooting import ShootingModel
 from ...params import DISTURBANCE_MOMENT_NAMES, ModelParameters
 from ...sensitivity import sensitivity
 from ..breakdowns import driving_jet_labels, loading_split
-from ..compare import Predictions, compare, predict
-from ..metrics import orientation_errors_deg
+from ..compare import compare
 
 # The mean norm of the difference of two independent isotropic 3-D noise vectors, each
 # of RMS norm 1: sqrt(2/3) E[chi_3] = 4 / sqrt(3 pi). A hysteresis gap (loading minus
 # unloading residual at the same force) of pure noise is this times the noise floor.
 NOISE_GAP_PER_FLOOR = 4.0 / np.sqrt(3.0 * np.pi)
-
-
-def subset(predictions: Predictions, mask: np.ndarray) -> Predictions:
-    return Predictions(predictions.tip_orientation_in_base[mask], predictions.tip_position_in_base_m[mask],
-                       predictions.bend_deg[mask], predictions.disturbance_moment_nm[mask])
 
 
 def rotation_between(first: np.ndarray, second: np.ndarray) -> np.ndarray:
@@ -56,7 +51,7 @@ def cosine(a: np.ndarray, b: np.ndarray) -> float:
 
 def rmse_by_jet(predictions: Predictions, steps: Dataset) -> dict[str, float]:
     """Held-out orientation RMSE (deg) per driving jet."""
-    errors = orientation_errors_deg(predictions.tip_orientation_in_base, steps.tip_orientation_in_base())
+    errors = rotation_angle_deg(predictions.tip_orientation_in_base, steps.tip_orientation_in_base())
     labels = driving_jet_labels(steps)
     return {str(label): float(np.sqrt(np.mean(errors[labels == label] ** 2))) for label in np.unique(labels)}
 
@@ -88,23 +83,21 @@ class OnlineEvidence:
 
 def online_evidence(model: ShootingModel, params: ModelParameters, steps: Dataset, held_out: np.ndarray,
                     gravity_in_base_m_s2: np.ndarray, settings: OnlineSettings) -> OnlineEvidence:
-    """Run online estimation over the session (recorded order; `compare.predict`, with
-    each step's own gravity as the bench runs it) and the baseline's moment sensitivity
-    at each held-out step (with the gravity the fits used)."""
-    online = predict(model, params, steps, settings)
+    """Run online estimation over the session (`PathPredictor`, in recorded order with
+    each step's own gravity, as the bench runs it) and the baseline's moment sensitivity
+    at each held-out step (predicted along the path with the gravity the fits used)."""
+    online = Predictions.along(PathPredictor(model, params, settings).predict(steps), ONLINE)
     missing = online.disturbance_moment_nm[held_out] - np.asarray(params.disturbance.moment_nm)
-    gravity = gravity_in_base_m_s2
+    rows = np.flatnonzero(held_out)
+    path = np.arange(rows[-1] + 1)
+    baseline = PathPredictor(model, params).predict(steps.select(path), gravity_in_base_m_s2[path])
     matrices = []
-    previous: Solution | None = None
-    for row in range(int(np.flatnonzero(held_out)[-1]) + 1):
-        row_params = replace(params, gravity_in_base_m_s2=tuple(gravity[row]))
-        solution = model.solve(steps.jet_forces_n[row], row_params, previous=previous)
-        if held_out[row]:
-            columns = sensitivity(model, steps.jet_forces_n[row], row_params, DISTURBANCE_MOMENT_NAMES,
-                                  nominal=solution, previous=previous).rotation_rows
-            # The sensitivity is in the rod tip's frame; signatures are in the tip sensor's.
-            matrices.append(solution.tip_sensor_mounting.T @ columns)
-        previous = solution
-    errors = orientation_errors_deg(online.tip_orientation_in_base[held_out],
-                                    steps.tip_orientation_in_base()[held_out])
+    for row in rows:
+        solution = baseline[row].ref.solution
+        row_params = replace(params, gravity_in_base_m_s2=tuple(gravity_in_base_m_s2[row]))
+        columns = sensitivity(model, steps.jet_forces_n[row], row_params, DISTURBANCE_MOMENT_NAMES, nominal=solution,
+                              previous=baseline[row - 1].ref.solution if row > 0 else None).rotation_rows
+        # The sensitivity is in the rod tip's frame; signatures are in the tip sensor's.
+        matrices.append(solution.tip_sensor_mounting.T @ columns)
+    errors = rotation_angle_deg(online.tip_orientation_in_base[held_out], steps.tip_orientation_in_base()[held_out])
     return OnlineEvidence(missing, np.array(matrices), float(np.sqrt(np.mean(errors**2))))

@@ -38,12 +38,12 @@ import numpy as np
 from ...data.dataset import Dataset
 from ...effects import Effect, qualified_parameter_names
 from ...errors import ConvergenceError
-from ...estimation.calibration import DEFAULT_NAMES, CalibrationPose, calibrate
-from ...geometry import body_rotation_error, matrix_from_quat, quat_from_matrix
+from ...estimation.calibration import DEFAULT_NAMES, CalibrationPose, calibrate, calibration_poses
+from ...estimation.path import REF, PathPredictor, Predictions
+from ...geometry import body_rotation_error, matrix_from_quat
 from ...models import make_model
 from ...models.shooting import ShootingModel
 from ...params import ModelParameters
-from ..compare import Predictions, calibration_poses
 from .measurements import tip_sensor_offset_in_tip_m, tip_sensor_position_in_base_m
 from .split import Split
 
@@ -132,27 +132,14 @@ def session_gravity(steps: Dataset) -> np.ndarray:
 
 def predict_path(model: ShootingModel, params: ModelParameters, steps: Dataset,
                  gravity_in_base_m_s2: np.ndarray) -> tuple[Predictions, np.ndarray]:
-    """Every step in recorded order, each solve carrying the previous one's path state,
-    with the calibrated (constant) disturbance: `compare.predict` with a given gravity.
-    Also returns the tip sensor's position (N, 3), base frame, m."""
+    """Ref. at every step in recorded order, each solve carrying the previous one's path
+    state (`PathPredictor` with the given gravity). Also returns the tip sensor's
+    position (N, 3), base frame, m."""
     offset = np.array(tip_sensor_offset_in_tip_m(steps))
-    orientations = np.empty((len(steps), 4))
-    positions = np.empty((len(steps), 3))
-    sensor_positions = np.empty((len(steps), 3))
-    bends = np.empty(len(steps))
-    shared: dict[tuple[float, ...], ModelParameters] = {}
-    previous = None
-    for row, jets in enumerate(steps.jet_forces_n):
-        gravity = tuple(gravity_in_base_m_s2[row])
-        # One parameter object per gravity lets the model reuse its packed problem.
-        row_params = shared.setdefault(gravity, replace(params, gravity_in_base_m_s2=gravity))
-        previous = model.solve(jets, row_params, previous=previous)
-        orientations[row] = quat_from_matrix(previous.tip_sensor_in_base_sensor())
-        positions[row] = previous.tip_position_in_base_m
-        sensor_positions[row] = previous.tip_position_in_base_m + previous.tip_rotation_in_base @ offset
-        bends[row] = previous.bend_angle_deg
-    moments = np.tile(np.asarray(params.disturbance.moment_nm, dtype=float), (len(steps), 1))
-    return Predictions(orientations, positions, bends, moments), sensor_positions
+    path = PathPredictor(model, params).predict(steps, gravity_in_base_m_s2)
+    sensor_positions = np.array([step.ref.solution.tip_position_in_base_m
+                                 + step.ref.solution.tip_rotation_in_base @ offset for step in path])
+    return Predictions.along(path, REF), sensor_positions
 
 
 def training_poses(problem: Problem) -> list[CalibrationPose]:

@@ -1,0 +1,179 @@
+"""One path predictor: the steps of a recorded path predicted in order, as the bench
+predicts them live.
+
+Each step gets the paper's two predictions (Table II):
+
+* "ref" (Ref.): the calibrated model with the calibrated, constant disturbance wrench
+  w_d (force and moment, as fitted by eq. 24) at every step;
+* "online" (Proposed), with online estimation on: w_d|m starts from the calibrated one
+  and is corrected at each step from that step's measured orientation (eq. 4), the
+  estimate carried along the path.
+
+Each of the two carries its own path state from step to step (``previous=``, which a
+clamp with play turns into hysteresis), so Ref. is the same whether online estimation
+runs or not. Gravity in the base frame is given per step: from the measured base
+orientation (`Dataset.gravity_in_base_m_s2`) unless the caller has a better one.
+
+The live session, `replay`, `compare`, `sensors` and `diagnose` all predict through
+`PathPredictor`: fed the same steps with the same parameters, they agree bit for bit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..data.dataset import Dataset
+from ..geometry import position_error_mm, quat_from_matrix, rotation_angle_deg
+from ..models.shooting import ShootingModel, Solution
+from ..params import ModelParameters
+from .online import OnlineDisturbanceEstimator, OnlineSettings
+
+REF = "ref"
+ONLINE = "online"
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """One method's prediction of one step, compared with that step's measurement.
+
+    method: "ref" or "online".
+    tip_orientation_in_base: predicted tip sensor orientation in the base sensor frame
+        (w, x, y, z); without mounting effects the rod tip in the base frame, as
+        `Dataset.tip_orientation_in_base`.
+    tip_position_in_base_m: predicted rod tip position, base frame, m.
+    bend_deg: predicted bending angle, deg.
+    disturbance_moment_nm: the w_d|m this prediction used, tip frame, N m: the calibrated
+        one for Ref., the estimate after this step's correction for online.
+    orientation_error_deg, position_error_mm: against the measurement (position None
+        when none was measured).
+    """
+
+    method: str
+    tip_orientation_in_base: np.ndarray
+    tip_position_in_base_m: np.ndarray
+    bend_deg: float
+    disturbance_moment_nm: np.ndarray
+    orientation_error_deg: float
+    position_error_mm: float | None
+    solution: Solution
+
+
+@dataclass(frozen=True)
+class StepPrediction:
+    """Both predictions of one step. index: the step's place along the path (0-based);
+    online: None when online estimation is off. disturbance_force_n: w_d|f, the
+    calibrated constant (tip frame, N). error_before_deg: the online prediction's error
+    before this step's correction (deg); iterations: corrections made (both None when
+    online estimation is off)."""
+
+    index: int
+    ref: Prediction
+    online: Prediction | None
+    disturbance_force_n: np.ndarray
+    error_before_deg: float | None
+    iterations: int | None
+
+    @property
+    def best(self) -> Prediction:
+        return self.online if self.online is not None else self.ref
+
+
+@dataclass(frozen=True)
+class Predictions:
+    """One method's predictions along a path of N steps, the fields of `Prediction` as
+    arrays: tip_orientation_in_base (N, 4), tip_position_in_base_m (N, 3) m, bend_deg
+    (N,), disturbance_moment_nm (N, 3) N m, tip frame."""
+
+    tip_orientation_in_base: np.ndarray
+    tip_position_in_base_m: np.ndarray
+    bend_deg: np.ndarray
+    disturbance_moment_nm: np.ndarray
+
+    @classmethod
+    def along(cls, steps: Sequence[StepPrediction], method: str) -> Predictions | None:
+        """The ``method`` ("ref" or "online") predictions of ``steps`` (None if some
+        step lacks that method)."""
+        picked = [getattr(step, method) for step in steps]
+        if not picked or any(prediction is None for prediction in picked):
+            return None
+        return cls(np.array([p.tip_orientation_in_base for p in picked]),
+                   np.array([p.tip_position_in_base_m for p in picked]),
+                   np.array([p.bend_deg for p in picked]),
+                   np.array([p.disturbance_moment_nm for p in picked]))
+
+    def select(self, rows: np.ndarray) -> Predictions:
+        """The steps picked by a boolean mask or integer indices."""
+        return Predictions(self.tip_orientation_in_base[rows], self.tip_position_in_base_m[rows],
+                           self.bend_deg[rows], self.disturbance_moment_nm[rows])
+
+
+def orientation_error_deg(predicted: np.ndarray, measured: np.ndarray) -> float:
+    """Angle (deg) between one predicted and one measured orientation (w, x, y, z): the
+    error of one step, computed the same way live and offline."""
+    return float(rotation_angle_deg(predicted, measured))
+
+
+def step_position_error_mm(predicted_m: np.ndarray, measured_m: np.ndarray | None) -> float | None:
+    """Distance (mm) between one predicted and one measured position (m); None when
+    nothing was measured."""
+    return None if measured_m is None else float(position_error_mm(predicted_m, measured_m))
+
+
+class PathPredictor:
+    """Predicts the steps of one path in order with ``params`` (the calibrated ones: their
+    w_d is Ref.'s constant and the online estimate's start), with online estimation when
+    ``online`` settings are given."""
+
+    def __init__(self, model: ShootingModel, params: ModelParameters, online: OnlineSettings | None = None) -> None:
+        self.model = model
+        self.params = params
+        self._estimator = OnlineDisturbanceEstimator(model, params, online) if online is not None else None
+        self._ref_params = params
+        self._previous_ref: Solution | None = None
+        self._count = 0
+
+    def step(self, jet_forces_n: np.ndarray, measured_tip_in_base: np.ndarray, gravity_in_base_m_s2: np.ndarray,
+             measured_tip_position_in_base_m: np.ndarray | None = None) -> StepPrediction:
+        """Predict the next step: jet forces (N), the measured tip orientation in the base
+        frame (w, x, y, z), gravity in the base frame then (m/s^2) and, when measured, the
+        tip position in the base frame (m). Raises `ConvergenceError` when the model does
+        not converge on it."""
+        gravity = tuple(gravity_in_base_m_s2)
+        if gravity != self._ref_params.gravity_in_base_m_s2:
+            # Kept while gravity stays the same, so the model can reuse its packed problem.
+            self._ref_params = replace(self.params, gravity_in_base_m_s2=gravity)
+        solution = self.model.solve(jet_forces_n, self._ref_params, previous=self._previous_ref)
+        self._previous_ref = solution
+        ref = _prediction(REF, solution, np.array(self.params.disturbance.moment_nm), measured_tip_in_base,
+                          measured_tip_position_in_base_m)
+        online = before = iterations = None
+        if self._estimator is not None:
+            result = self._estimator.update(jet_forces_n, measured_tip_in_base,
+                                            gravity_in_base_m_s2=gravity_in_base_m_s2)
+            online = _prediction(ONLINE, result.solution, result.disturbance_moment_nm, measured_tip_in_base,
+                                 measured_tip_position_in_base_m)
+            before, iterations = result.error_before_deg, result.iterations
+        record = StepPrediction(self._count, ref, online, np.array(self.params.disturbance.force_n), before, iterations)
+        self._count += 1
+        return record
+
+    def predict(self, steps: Dataset, gravity_in_base_m_s2: np.ndarray | None = None) -> list[StepPrediction]:
+        """Every row of ``steps`` in order (see `step`). gravity_in_base_m_s2: (N, 3) per
+        row, m/s^2; None takes each row's from its measured base orientation."""
+        gravity = steps.gravity_in_base_m_s2() if gravity_in_base_m_s2 is None else np.asarray(gravity_in_base_m_s2)
+        measured = steps.tip_orientation_in_base()
+        positions = steps.tip_position_in_base_m()
+        return [self.step(steps.jet_forces_n[row], measured[row], gravity[row],
+                          None if positions is None else positions[row]) for row in range(len(steps))]
+
+
+def _prediction(method: str, solution: Solution, moment_nm: np.ndarray, measured: np.ndarray,
+                measured_position_m: np.ndarray | None) -> Prediction:
+    predicted = quat_from_matrix(solution.tip_sensor_in_base_sensor())
+    position = solution.tip_position_in_base_m
+    return Prediction(method, predicted, position, solution.bend_angle_deg, moment_nm,
+                      orientation_error_deg(predicted, measured), step_position_error_mm(position, measured_position_m),
+                      solution)
