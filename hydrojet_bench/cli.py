@@ -18,7 +18,7 @@ from . import __version__
 from .errors import UserError
 
 # Order is the order shown in --help.
-COMMAND_MODULES = ("run", "replay", "sensors", "demo", "simulate", "calibrate", "compare", "diagnose",
+COMMAND_MODULES = ("run", "replay", "sensors", "simulate", "calibrate", "compare", "diagnose",
                    "perf", "emulate", "recover")
 
 

@@ -12,8 +12,9 @@ settle time, averages the end of the step, and then:
 
 Devices come from `bench.rig.open_rig`. Exit paths: the valve driver sends ALL_OFF when
 its context exits, whatever the reason (plan done, exception, cancellation by
-SIGINT/SIGTERM); the firmware's watchdog covers a host that dies without exiting. The log is finished on every path but a hard kill, after
-which `hydrojet-bench recover` salvages it up to its last flushed chunk.
+SIGINT/SIGTERM); the firmware's watchdog covers a host that dies without exiting. The
+log is finished on every path but a hard kill, after which `hydrojet-bench recover`
+salvages it up to its last flushed chunk.
 """
 
 from __future__ import annotations
