@@ -71,9 +71,9 @@ DEFAULTS = ModelDefaults("cosserat")
 
 
 def run(args: argparse.Namespace) -> int:
-    after_choice = model_choice(args, DEFAULTS)
     before_choice = None if args.baseline is None else choose_model(args.model, (), args.baseline, DEFAULTS,
                                                                     effect_files=args.effect)
+    after_choice = model_choice(args, DEFAULTS)
     profile, steps = load_steps(args.input, args.profile)
     validation = steps.select(steps.sweep >= 0) if (steps.sweep >= 0).any() else steps
     if len(validation) == 0:
