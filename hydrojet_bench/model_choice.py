@@ -31,6 +31,10 @@ class ModelDefaults:
     effects: tuple[str, ...] = ()
 
 
+# The default of the commands that have no profile or session log to ask.
+COSSERAT = ModelDefaults("cosserat")
+
+
 @dataclass(frozen=True)
 class ModelChoice:
     """The model (gravity always included) and, among its effects, the ``requested`` ones
@@ -64,8 +68,8 @@ def build_model(name: str, effect_specs: Sequence[str]) -> tuple[ShootingModel, 
     return make_model(name, always + requested), requested
 
 
-def choose_model(model: str | None, effects: Sequence[str], parameter_path: Path | None, defaults: ModelDefaults,
-                 *, effect_files: Sequence[str] | None = None) -> ModelChoice:
+def choose_model(model: str | None, effects: Sequence[str], parameter_path: Path | None,
+                 defaults: ModelDefaults = COSSERAT, *, effect_files: Sequence[str] | None = None) -> ModelChoice:
     """The model per the rule above. An effect the parameter file names that is not in
     the library is looked up by name among ``effect_files`` (default: ``effects``), the
     path/to/file.py:Class specs of the command line."""
@@ -81,7 +85,7 @@ def choose_model(model: str | None, effects: Sequence[str], parameter_path: Path
     return ModelChoice(built, requested, specs, parameter_file, parameter_path)
 
 
-def model_choice(args: argparse.Namespace, defaults: ModelDefaults) -> ModelChoice:
+def model_choice(args: argparse.Namespace, defaults: ModelDefaults = COSSERAT) -> ModelChoice:
     """`choose_model` on the options of `commands.common.add_model_arguments`."""
     return choose_model(args.model, args.effect, getattr(args, "params", None), defaults)
 

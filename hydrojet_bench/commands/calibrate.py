@@ -13,18 +13,16 @@ from pathlib import Path
 from ..analysis.compare import calibrate_dataset
 from ..errors import UserError
 from ..estimation.calibration import DEFAULT_POSITION_WEIGHT_RAD_PER_M
-from ..model_choice import ModelDefaults, model_choice
+from ..model_choice import COSSERAT, model_choice
 from ..params_io import ParameterFile, write_parameter_file
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
-
-DEFAULTS = ModelDefaults("cosserat")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("calibrate", help="fit model parameters to the calibration poses")
     add_input_arguments(parser)
-    add_model_arguments(parser, default=DEFAULTS.model)
+    add_model_arguments(parser, default=COSSERAT.model)
     parser.add_argument("-o", "--output", type=Path, required=True, help="parameter file to write (TOML)")
     parser.add_argument("--position-weight", type=float, default=DEFAULT_POSITION_WEIGHT_RAD_PER_M,
                         metavar="RAD_PER_M", help="weight of tip position errors when positions were "
@@ -36,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.position_weight >= 0:
         raise UserError(f"--position-weight must be >= 0, got {args.position_weight}")
     profile, steps = load_steps(args.input, args.profile)
-    choice = model_choice(args, DEFAULTS)
+    choice = model_choice(args)
     model = choice.model
     try:
         result = calibrate_dataset(model, steps, profile.model_parameters(), choice.calibration_names,

@@ -25,7 +25,7 @@ from ..analysis.metrics import ErrorSummary
 from ..data.dataset import Dataset
 from ..errors import UserError
 from ..estimation import OnlineSettings
-from ..model_choice import ModelChoice, ModelDefaults, choose_model, model_choice
+from ..model_choice import ModelChoice, choose_model, model_choice
 from ..models.shooting import ShootingModel
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
@@ -66,14 +66,10 @@ class Evaluation:
         return f"{self.source} ({self.model.name}; {', '.join(e.name for e in self.model.effects)})"
 
 
-# Never used: --params is required and brings the model.
-DEFAULTS = ModelDefaults("cosserat")
-
-
 def run(args: argparse.Namespace) -> int:
-    before_choice = None if args.baseline is None else choose_model(args.model, (), args.baseline, DEFAULTS,
+    before_choice = None if args.baseline is None else choose_model(args.model, (), args.baseline,
                                                                     effect_files=args.effect)
-    after_choice = model_choice(args, DEFAULTS)
+    after_choice = model_choice(args)
     profile, steps = load_steps(args.input, args.profile)
     validation = steps.select(steps.sweep >= 0) if (steps.sweep >= 0).any() else steps
     if len(validation) == 0:

@@ -21,17 +21,15 @@ from ..analysis.diagnosis.noise import repeatability_floor
 from ..data import load_dataset
 from ..effects import load_effect
 from ..errors import ConvergenceError, UserError
-from ..model_choice import ModelChoice, ModelDefaults, model_choice
+from ..model_choice import COSSERAT, ModelChoice, model_choice
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
-
-DEFAULTS = ModelDefaults("cosserat")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("diagnose", help="which effect is the model missing? (cross-validated)")
     add_input_arguments(parser)
-    add_model_arguments(parser, default=DEFAULTS.model)
+    add_model_arguments(parser, default=COSSERAT.model)
     parser.add_argument("--candidate", action="append", default=[], metavar="NAME",
                         help="an effect to try (library name or path/to/file.py:Class; repeatable; "
                              "default: every library effect not given with --effect)")
@@ -47,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.workers is not None and args.workers < 1:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
-    choice = model_choice(args, DEFAULTS)  # validates --effect before the data is read
+    choice = model_choice(args)  # validates --effect before the data is read
     candidates = tuple(load_effect(spec) for spec in dict.fromkeys(args.candidate)) or None
     profile, steps = load_steps(args.input, args.profile)
     console = render.console_for(args)
