@@ -1,9 +1,10 @@
 """The `hydrojet-bench` command line.
 
 Each subcommand lives in `hydrojet_bench.commands.<name>` and exposes
-`register(subparsers)`, which adds its parser and sets `func`. A `UserError` (or an
-`OSError` on a path the user gave) is printed as one clear line with exit code 2, never
-as a traceback.
+`register(subparsers)`, which adds its parser and sets `func`; the commands share their
+options (`commands.common`), their model rule (`hydrojet_bench.model_choice`) and their
+output (`commands.render`). A `UserError` is printed as one clear line with exit code 2,
+never as a traceback.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from . import __version__
 from .errors import UserError
 
 # Order is the order shown in --help.
-COMMAND_MODULES = ("run", "replay", "sensors", "demo", "simulate", "calibrate", "compare", "diagnose",
+COMMAND_MODULES = ("run", "replay", "sensors", "simulate", "calibrate", "compare", "diagnose",
                    "perf", "emulate", "recover")
 
 

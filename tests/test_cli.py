@@ -1,4 +1,4 @@
-"""The command line: the demo, the perf JSON, and user mistakes without tracebacks."""
+"""The command line: its commands, the perf JSON, and user mistakes without tracebacks."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import json
 import subprocess
 import sys
 
-from hydrojet_bench.cli import main
+from hydrojet_bench.cli import COMMAND_MODULES, main
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
@@ -14,10 +14,12 @@ def run_cli(*args: str) -> subprocess.CompletedProcess:
                           timeout=300)
 
 
-def test_demo_prints_both_models(capsys):
-    assert main(["demo", "--steps", "2", "--max-force", "0.1"]) == 0
+def test_help_lists_every_command_and_no_retired_one(capsys):
+    assert main([]) == 2
     out = capsys.readouterr().out
-    assert "Cosserat" in out and "PRB" in out and "0.100" in out
+    for name in COMMAND_MODULES:
+        assert f"    {name}" in out, name
+    assert "demo" not in out  # retired: `make demo` runs `run`
 
 
 def test_perf_writes_json_with_every_figure_and_its_target(tmp_path):
@@ -34,7 +36,8 @@ def test_perf_writes_json_with_every_figure_and_its_target(tmp_path):
 def test_user_mistakes_are_one_line_without_traceback(tmp_path):
     for args, message in (
         (["perf", "--runs", "10"], "--runs must be at least 200"),
-        (["demo", "--max-force", "-1"], "--max-force must be a positive number"),
+        (["calibrate", str(tmp_path / "missing.csv"), "--position-weight", "-1", "-o", str(tmp_path / "p.toml")],
+         "--position-weight must be >= 0"),
         (["perf", "--runs", "200", "--json", str(tmp_path / "missing" / "out.json")], "cannot write"),
     ):
         result = run_cli(*args)

@@ -10,18 +10,17 @@ settle time, averages the end of the step, and then:
 * on every step: predicts it with the calibrated constant disturbance ("ref") and, with
   online estimation on, corrects w_d|m from the measurement (eq. 4).
 
-Exit paths: the valve driver sends ALL_OFF when its context exits, whatever the reason
-(plan done, exception, cancellation by SIGINT/SIGTERM); the firmware's watchdog covers a
-host that dies without exiting. The log is finished on every path but a hard kill, after
-which `hydrojet-bench recover` salvages it up to its last flushed chunk.
+Devices come from `bench.rig.open_rig`. Exit paths: the valve driver sends ALL_OFF when
+its context exits, whatever the reason (plan done, exception, cancellation by
+SIGINT/SIGTERM); the firmware's watchdog covers a host that dies without exiting. The
+log is finished on every path but a hard kill, after which `hydrojet-bench recover`
+salvages it up to its last flushed chunk.
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
-import threading
 import time
 from collections import deque
 from collections.abc import Callable
@@ -32,7 +31,7 @@ import numpy as np
 
 from drivers.aurora.client import AuroraTracker
 from drivers.aurora.errors import AuroraError
-from drivers.imu import AsyncIcm20948, Icm20948, ImuError, ImuPairFusion
+from drivers.imu import ImuError
 from drivers.transport.base import TransportError
 from drivers.valve.client import ValveController, ValveError
 
@@ -50,8 +49,9 @@ from ..plans import CALIBRATION_SWEEP, Plan, PlanStep
 from ..profile import RigProfile
 from .clock import Clock, ScaledClock
 from .recorder import StepRecorder
-from .settings import BenchSettings, SIM
-from .simulated_rig import SimulatedDevices, simulated_devices
+from .rig import ImuPair, open_rig
+from .settings import BenchSettings
+from .simulated_rig import SimulatedDevices
 
 # Consecutive stream failures after which a device counts as lost and the session stops.
 MAX_CONSECUTIVE_FAILURES = 20
@@ -204,42 +204,15 @@ class Session:
 
     async def _run_devices(self) -> int:
         request = self.request
-        settings = request.settings
-        async with contextlib.AsyncExitStack() as stack:
-            valves_url, tracker_url, imu_bus = settings.transports.valves, settings.transports.tracker, None
-            if settings.transports.simulated:
-                devices = await stack.enter_async_context(
-                    simulated_devices(request.profile, settings, self.clock, request.seed))
-                self._devices = devices
-                valves_url = devices.valves_url or valves_url
-                tracker_url = devices.tracker_url or tracker_url
-                imu_bus = devices.imu_bus
-                self.event("info", "rig", f"simulated rig: {devices.twin!r}")
-            if imu_bus is None and settings.transports.imu_bus != SIM:
-                import smbus2
-
-                imu_bus = stack.enter_context(smbus2.SMBus(settings.transports.imu_bus))
-            tracker = AuroraTracker(tracker_url, list(settings.tracker.tools), use_tx=settings.tracker.use_tx,
-                                    clock=self.clock.now)
-            await stack.enter_async_context(tracker)
-            self.event("info", "tracker", f"tracking {', '.join(tracker.handles)} ({tracker.version_text.strip()[:40]})")
-            imus = await self._open_imus(imu_bus)
-            # The first solve of a process loads the compiled kernels (about a second; far
-            # longer on a busy machine): done now, before any valve is armed.
-            await asyncio.to_thread(request.model.solve, np.zeros(3), self.params)
-            valves = ValveController(valves_url, calibrations=settings.valves.calibrations,
-                                     retries=settings.valves.retries,
-                                     reply_timeout_s=settings.valves.reply_timeout_ms / 1000.0,
-                                     heartbeat_interval_s=settings.valves.heartbeat_ms / 1000.0)
-            # Entered last, so it exits first: ALL_OFF before anything else is torn down.
-            await stack.enter_async_context(valves)
-            self.event("info", "valves", "armed")
+        async with open_rig(request.profile, request.settings, self.clock, seed=request.seed,
+                            before_arming=self._load_kernels, on_event=self.event) as rig:
+            self._devices = rig.simulated
             async with asyncio.TaskGroup() as group:
-                streams = [group.create_task(self._em_stream(tracker), name="em-stream")]
-                if imus is not None:
-                    streams.append(group.create_task(self._imu_stream(imus), name="imu-stream"))
+                streams = [group.create_task(self._em_stream(rig.tracker), name="em-stream")]
+                if rig.imus is not None:
+                    streams.append(group.create_task(self._imu_stream(rig.imus), name="imu-stream"))
                 try:
-                    return await self._play(valves)
+                    return await self._play(rig.valves)
                 finally:
                     # Python 3.11's wait_for can swallow a cancellation that arrives as its
                     # inner future completes (the IMU reads complete all the time), so the
@@ -248,24 +221,10 @@ class Session:
                     for task in streams:
                         task.cancel()
 
-    async def _open_imus(self, bus) -> tuple[AsyncIcm20948, AsyncIcm20948, ImuPairFusion] | None:
-        if bus is None:
-            return None
-        imu = self.request.settings.imu
-        lock = threading.Lock()
-        chips = []
-        for address, calibration in ((imu.base_address, imu.base_calibration),
-                                     (imu.tip_address, imu.tip_calibration)):
-            driver = Icm20948(bus, address, clock=self.clock.now, calibration=calibration,
-                              sleep=lambda seconds: time.sleep(seconds / self.clock.time_scale))
-            chip = AsyncIcm20948(driver, bus_lock=lock)
-            await chip.initialize()
-            if imu.gyro_bias_samples:
-                await chip.estimate_gyro_bias(imu.gyro_bias_samples)  # applied to the driver's calibration
-            chips.append(chip)
-        self.event("info", "imu", f"ICM-20948 at {imu.base_address:#04x} and {imu.tip_address:#04x} ready")
-        return chips[0], chips[1], ImuPairFusion(imu.rate_hz, gain=imu.madgwick_gain,
-                                                 use_magnetometer=imu.use_magnetometer)
+    async def _load_kernels(self) -> None:
+        """The first solve of a process loads the compiled kernels (about a second; far
+        longer on a busy machine): done before any valve is armed."""
+        await asyncio.to_thread(self.request.model.solve, np.zeros(3), self.params)
 
     # --- streams --------------------------------------------------------------------
 
@@ -325,8 +284,8 @@ class Session:
             self.em.add(t_s, np.array(base.orientation), np.array(tip.orientation), base_p, tip_p)
             self._write_sample("em", t_s, base.orientation, tip.orientation, base_p, tip_p)
 
-    async def _imu_stream(self, imus) -> None:
-        base_chip, tip_chip, fusion = imus
+    async def _imu_stream(self, imus: ImuPair) -> None:
+        base_chip, tip_chip, fusion = imus.base, imus.tip, imus.fusion
         log = self._log
         failures = 0
         async for _ in self._periodic(self.request.settings.imu.rate_hz):

@@ -1,7 +1,8 @@
-"""`hydrojet-bench calibrate DATA --model M [--effect NAME ...] -o params.toml`.
+"""`hydrojet-bench calibrate INPUT [--model M] [--effect NAME ...] -o params.toml`.
 
-Fits E0, EL, L and the constant disturbance wrench w_d (plus the parameters of enabled
-effects) to the calibration rows (sweep -1) of the data, as in the paper's sec. V-B.
+Fits E0, EL, L and the constant disturbance wrench w_d (plus the parameters of the
+--effect's) to the calibration rows (sweep -1) of the input, as in the paper's
+sec. V-B, and writes them with their standard errors as a parameter file.
 """
 
 from __future__ import annotations
@@ -9,20 +10,18 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rich.console import Console
-from rich.table import Table
-
-from ..effects import qualified_parameter_names
 from ..errors import UserError
-from ..estimation.calibration import DEFAULT_NAMES, DEFAULT_POSITION_WEIGHT_RAD_PER_M, calibrate_dataset
+from ..estimation.calibration import DEFAULT_POSITION_WEIGHT_RAD_PER_M, calibrate_dataset
+from ..model_choice import COSSERAT, model_choice
 from ..params_io import ParameterFile, write_parameter_file
-from .common import add_data_arguments, add_model_arguments, build_model, load_steps
+from . import render
+from .common import add_input_arguments, add_model_arguments, load_steps
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("calibrate", help="fit model parameters to the calibration poses")
-    add_data_arguments(parser)
-    add_model_arguments(parser)
+    add_input_arguments(parser)
+    add_model_arguments(parser, default=COSSERAT.model)
     parser.add_argument("-o", "--output", type=Path, required=True, help="parameter file to write (TOML)")
     parser.add_argument("--position-weight", type=float, default=DEFAULT_POSITION_WEIGHT_RAD_PER_M,
                         metavar="RAD_PER_M", help="weight of tip position errors when positions were "
@@ -33,18 +32,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if not args.position_weight >= 0:
         raise UserError(f"--position-weight must be >= 0, got {args.position_weight}")
-    profile, steps = load_steps(args)
-    model, requested = build_model(args.model, args.effect)
-    names = DEFAULT_NAMES + tuple(name for effect in requested for name in qualified_parameter_names(effect))
+    profile, steps = load_steps(args.input, args.profile)
+    choice = model_choice(args)
+    model = choice.model
     try:
-        result = calibrate_dataset(model, steps, profile.model_parameters(), names,
+        result = calibrate_dataset(model, steps, profile.model_parameters(), choice.calibration_names,
                                    position_weight_rad_per_m=args.position_weight)
     except ValueError as error:
-        raise UserError(f"{args.data}: {error}") from None
-    console = Console()
-    table = Table(title=f"{model.name} calibrated on {len(steps.calibration_rows())} poses of {args.data}")
-    for column in ("parameter", "value", "standard error"):
-        table.add_column(column, justify="right")
+        raise UserError(f"{args.input}: {error}") from None
+    console = render.console_for(args)
+    table = render.table(f"{model.name} calibrated on {len(steps.calibration_rows())} poses of {args.input}",
+                         labels=("parameter",), numbers=("value", "standard error"))
     for name, value, error in zip(result.names, result.values, result.standard_errors):
         table.add_row(name, f"{value:.6g}", f"{error:.2g}")
     console.print(table)
@@ -57,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         model=model.name, effects=tuple(effect.name for effect in model.effects),
         parameters=dict(zip(result.names, map(float, result.values))),
         standard_errors=dict(zip(result.names, map(float, result.standard_errors))),
-        calibration={"data": str(args.data), "profile": profile.source,
+        calibration={"data": str(args.input), "profile": profile.source,
                      "poses": len(steps.calibration_rows()),
                      "rms_orientation_deg_before": round(result.rms_orientation_deg_before, 4),
                      "rms_orientation_deg_after": round(result.rms_orientation_deg_after, 4)}))

@@ -1,5 +1,5 @@
-"""Options and loading shared by the analysis commands: a data file plus its rig
-profile, a model, and effects."""
+"""Options shared by the commands: the input file and its rig profile, and the model
+(resolved by `hydrojet_bench.model_choice`)."""
 
 from __future__ import annotations
 
@@ -8,41 +8,39 @@ from pathlib import Path
 
 from ..data import load_dataset
 from ..data.dataset import Dataset
-from ..effects import Effect, load_effect
-from ..models import MODELS, make_model
-from ..models.shooting import ShootingModel
+from ..models import MODELS
 from ..profile import RigProfile
 
+ANY_INPUT = "a CSV file (see hydrojet_bench/data/csv_io.py) or a session log (.mcap)"
+SESSION_LOG = "a session log (.mcap) from `hydrojet-bench run`"
 
-def add_data_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("data", type=Path, help="measurements: a CSV file (see hydrojet_bench/data/csv_io.py) "
-                        "or a bench session log (.mcap)")
+
+def add_input_arguments(parser: argparse.ArgumentParser, what: str = ANY_INPUT) -> None:
+    """The positional INPUT (``what``: the kinds of file the command reads) and --profile."""
+    parser.add_argument("input", type=Path, metavar="INPUT", help=f"measurements: {what}")
     parser.add_argument("--profile", default=None,
                         help="rig profile: a TOML file or a shipped name (default: the profile embedded in "
                              "a session log; sim for a CSV file)")
 
 
-def add_model_arguments(parser: argparse.ArgumentParser, default_model: str | None = "cosserat") -> None:
-    parser.add_argument("--model", choices=tuple(MODELS), default=default_model,
-                        help="kinematic model" + (f" (default {default_model})" if default_model else ""))
+def add_model_arguments(parser: argparse.ArgumentParser, default: str, params: str | None = None,
+                        params_required: bool = False) -> None:
+    """--model and --effect; --params too when ``params`` (its help) is given. default:
+    what the command runs without a parameter file or --model, for the help."""
+    fallback = f"the parameter file's, else {default}" if params is not None else default
+    parser.add_argument("--model", choices=tuple(MODELS), default=None, help=f"kinematic model (default: {fallback})")
     parser.add_argument("--effect", action="append", default=[], metavar="NAME",
-                        help="enable an effect: a library name or path/to/file.py:Class (repeatable)")
+                        help="add an effect to the model: a library name or path/to/file.py:Class (repeatable)")
+    if params is not None:
+        parser.add_argument("--params", type=Path, required=params_required, metavar="FILE",
+                            help=f"parameter file from `calibrate`: {params}; it brings its model and effects, "
+                                 "--model and --effect on the command line win")
 
 
-def load_steps(args: argparse.Namespace) -> tuple[RigProfile, Dataset]:
-    """The profile and the data reduced to one row per quasistatic step. Without
-    ``--profile``, a session log brings its own profile and a CSV file gets "sim"."""
-    profile = args.profile
-    if profile is None and Path(args.data).suffix.lower() != ".mcap":
+def load_steps(path: Path, profile: str | None) -> tuple[RigProfile, Dataset]:
+    """The profile and the data reduced to one row per quasistatic step. Without a
+    profile, a session log brings its own and a CSV file gets "sim"."""
+    if profile is None and Path(path).suffix.lower() != ".mcap":
         profile = "sim"
-    dataset = load_dataset(args.data, profile)
+    dataset = load_dataset(path, profile)
     return dataset.profile, dataset.quasistatic_steps()
-
-
-def build_model(name: str, effect_specs: list[str]) -> tuple[ShootingModel, tuple[Effect, ...]]:
-    """The model with gravity plus the requested effects, and the requested effects
-    themselves (whose parameters a calibration fits; gravity stays at its nominal weight
-    unless requested)."""
-    requested = tuple(load_effect(spec) for spec in dict.fromkeys(effect_specs))
-    always = () if any(effect.name == "gravity" for effect in requested) else (load_effect("gravity"),)
-    return make_model(name, always + requested), requested

@@ -1,4 +1,4 @@
-"""`hydrojet-bench compare DATA --params P [--baseline B] [--online] [--json FILE] [--report DIR]`.
+"""`hydrojet-bench compare INPUT --params P [--baseline B] [--online] [--json PATH] [--report DIR]`.
 
 Predicts every validation step (sweep >= 0; all steps when there are no sweeps) with the
 calibrated, constant disturbance ("Ref.") and, with --online, with online disturbance
@@ -11,14 +11,12 @@ steps and the errors are shown before and after.
 from __future__ import annotations
 
 import argparse
-import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from rich.console import Console
-from rich.table import Table
 
 from ..analysis.breakdowns import (MISSING_LABEL, STRAIGHT, STRAIGHT_BELOW_DEG, Breakdowns, break_down,
                                    direction_order, disturbance_by_sweep, per_step)
@@ -26,12 +24,12 @@ from ..analysis.compare import Comparison, compare_methods
 from ..analysis.metrics import ErrorSummary
 from ..bench.replay import logged_steps
 from ..data.dataset import Dataset
-from ..effects import LIBRARY, load_effect
 from ..errors import UserError
 from ..estimation import OnlineSettings
+from ..model_choice import ModelChoice, choose_model, model_choice
 from ..models.shooting import ShootingModel
-from ..params_io import ParameterFile, read_parameter_file
-from .common import add_data_arguments, add_model_arguments, build_model, load_steps
+from . import render
+from .common import add_input_arguments, add_model_arguments, load_steps
 
 LABELS = {"ref": "Ref.", "online": "Proposed"}
 BREAKDOWN_KEYS = ("by_jet", "by_direction", "by_region", "loading_unloading", "over_time", "worst_poses")
@@ -40,14 +38,14 @@ BREAKDOWN_KEYS = ("by_jet", "by_direction", "by_region", "loading_unloading", "o
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("compare", help="model predictions against measurements (Table II), "
                                    "where the model fails, before/after an added effect")
-    add_data_arguments(parser)
-    add_model_arguments(parser, default_model=None)
-    parser.add_argument("--params", type=Path, required=True, help="parameter file from `calibrate`")
+    add_input_arguments(parser)
+    add_model_arguments(parser, default="the parameter file's", params="the parameters to evaluate",
+                        params_required=True)
     parser.add_argument("--baseline", type=Path, metavar="BEFORE",
                         help="a second parameter file (e.g. calibrated without the added effect), "
                              "predicted on the same data with its own model and effects: errors before/after")
     parser.add_argument("--online", action="store_true", help="also run online disturbance estimation")
-    parser.add_argument("--json", type=Path, metavar="FILE", help="write the figures as JSON")
+    render.add_json_argument(parser)
     parser.add_argument("--report", type=Path, metavar="DIR", help="write figures (PNG) to this folder")
     parser.epilog = ("--effect adds effects to the --params model only; it also names the file of an effect "
                      "that a parameter file lists by name (e.g. one calibrated from path/to/file.py:Class).")
@@ -70,27 +68,27 @@ class Evaluation:
 
 
 def run(args: argparse.Namespace) -> int:
-    after_file = read_parameter_file(args.params)
-    before_file = None if args.baseline is None else read_parameter_file(args.baseline)
+    before_choice = None if args.baseline is None else choose_model(args.model, (), args.baseline,
+                                                                    effect_files=args.effect)
+    after_choice = model_choice(args)
     # A session log's own settled steps are the rows its live estimator predicted: on
     # them, Ref. and Proposed are the live figures.
-    logged = logged_steps(args.data, args.profile) if Path(args.data).suffix.lower() == ".mcap" else None
-    profile, steps = (logged.profile, logged) if logged is not None else load_steps(args)
+    logged = logged_steps(args.input, args.profile) if Path(args.input).suffix.lower() == ".mcap" else None
+    profile, steps = (logged.profile, logged) if logged is not None else load_steps(args.input, args.profile)
     validation = steps.select(steps.sweep >= 0) if (steps.sweep >= 0).any() else steps
     if len(validation) == 0:
-        raise UserError(f"{args.data}: no steps to compare")
-    named_files = {load_effect(spec).name: spec for spec in args.effect}
+        raise UserError(f"{args.input}: no steps to compare")
 
-    def evaluate(parameter_file: ParameterFile, path: Path, added: list[str]) -> Evaluation:
-        model = _model_for(parameter_file, path, args.model, named_files, added)
-        params = parameter_file.apply(profile.model_parameters(), path)
-        results = compare_methods(model, params, validation, OnlineSettings() if args.online else None)
-        return Evaluation(path, model, results, {key: break_down(c, validation) for key, c in results.items()})
+    def evaluate(choice: ModelChoice) -> Evaluation:
+        params = choice.parameters(profile.model_parameters())
+        results = compare_methods(choice.model, params, validation, OnlineSettings() if args.online else None)
+        return Evaluation(choice.parameter_path, choice.model, results,
+                          {key: break_down(c, validation) for key, c in results.items()})
 
-    after = evaluate(after_file, args.params, args.effect)
-    before = None if before_file is None else evaluate(before_file, args.baseline, [])
-    console = Console()
-    print_tables(console, after.results, f"{after.model.name} on {args.data}")
+    after = evaluate(after_choice)
+    before = None if before_choice is None else evaluate(before_choice)
+    console = render.console_for(args)
+    print_tables(console, after.results, f"{after.model.name} on {args.input}")
     print_breakdowns(console, after, validation)
     if before is not None:
         print_before_after(console, before, after)
@@ -105,22 +103,6 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _model_for(parameter_file: ParameterFile, path: Path, model_name: str | None, named_files: dict[str, str],
-               added: list[str]) -> ShootingModel:
-    """The file's model (or ``model_name``) with the file's effects, file effects found
-    by name among the --effect specs, plus the ``added`` effect specs."""
-    specs = [named_files.get(name, name) for name in parameter_file.effects]
-    for spec in specs:
-        if spec not in LIBRARY and ":" not in spec:
-            raise UserError(f"{path}: effect {spec!r} is not in the library ({', '.join(sorted(LIBRARY))}); "
-                            "if it comes from a file, give that file with --effect path/to/file.py:ClassName")
-    try:
-        model, _ = build_model(model_name or parameter_file.model, specs + list(added))
-    except UserError as error:
-        raise UserError(f"{path}: {error}") from None
-    return model
-
-
 # --- console -------------------------------------------------------------------------
 
 
@@ -131,16 +113,13 @@ def _cells(summary: ErrorSummary | None) -> list[str]:
             "-" if summary.position_rmse_mm is None else f"{summary.position_rmse_mm:.2f}"]
 
 
-def _method_columns(table: Table, keys) -> None:
-    for key in keys:
-        table.add_column(f"{LABELS[key]} orient. (deg)", justify="right")
-        table.add_column(f"{LABELS[key]} pos. (mm)", justify="right")
+def _method_headers(keys) -> list[str]:
+    return [f"{LABELS[key]} {quantity}" for key in keys for quantity in ("orient. (deg)", "pos. (mm)")]
 
 
 def print_tables(console: Console, results: dict[str, Comparison], title: str) -> None:
-    table = Table(title=f"RMS errors, {title}", caption="bend bins in degrees, as the paper's Table II")
-    table.add_column("group", no_wrap=True)
-    _method_columns(table, results)
+    table = render.table(f"RMS errors, {title}", labels=("group",), numbers=_method_headers(results),
+                         caption="bend bins in degrees, as the paper's Table II")
     reference = results["ref"]
 
     def row(label: str, pick: Callable[[Comparison], ErrorSummary]) -> None:
@@ -158,13 +137,11 @@ def print_breakdowns(console: Console, evaluation: Evaluation, steps: Dataset) -
     """Compact tables of where the model fails; the full series go to JSON and plots."""
     parts = evaluation.breakdowns
     reference = parts["ref"]
-    table = Table(title=f"Where the model fails: RMS errors by physical grouping ({evaluation.model.name})",
-                  caption="direction: azimuth of the measured tip tangent in the base frame; hysteresis gap: "
-                          "mean norm of the difference of the error vectors at equal forces "
-                          "(noise alone makes it about 1.4 x the RMS)")
-    table.add_column("group", no_wrap=True)
-    table.add_column("n", justify="right")
-    _method_columns(table, parts)
+    table = render.table(f"Where the model fails: RMS errors by physical grouping ({evaluation.model.name})",
+                         labels=("group",), numbers=["n", *_method_headers(parts)],
+                         caption="direction: azimuth of the measured tip tangent in the base frame; hysteresis "
+                                 "gap: mean norm of the difference of the error vectors at equal forces "
+                                 "(noise alone makes it about 1.4 x the RMS)")
 
     def across(cells: Callable[[Breakdowns], list[str]]) -> list[str]:
         return [cell for part in parts.values() for cell in cells(part)]
@@ -209,11 +186,9 @@ def _number(value: float | None, signed: bool = False) -> str:
 
 def print_region(console: Console, reference: Breakdowns, model_name: str) -> None:
     directions = [d for d in direction_order() if any(d in row for row in reference.by_region.values())]
-    table = Table(title=f"Ref. orientation RMSE (deg) by region of the workspace ({model_name})",
-                  caption="rows: measured bend bin (Table II); columns: bending direction (azimuth, deg)")
-    table.add_column("bend (deg)", no_wrap=True)
-    for direction in directions:
-        table.add_column(direction, justify="right")
+    table = render.table(f"Ref. orientation RMSE (deg) by region of the workspace ({model_name})",
+                         labels=("bend (deg)",), numbers=directions,
+                         caption="rows: measured bend bin (Table II); columns: bending direction (azimuth, deg)")
     for bend, row in reference.by_region.items():
         table.add_row(_bend_label(bend),
                       *[f"{row[d].orientation_rmse_deg:.2f}" if d in row else "" for d in directions])
@@ -223,12 +198,12 @@ def print_region(console: Console, reference: Breakdowns, model_name: str) -> No
 def print_worst(console: Console, evaluation: Evaluation) -> None:
     worst = evaluation.breakdowns["ref"].worst
     online = evaluation.results.get("online")
-    table = Table(title=f"Worst poses of Ref. ({evaluation.model.name})",
-                  caption="row: index among the compared steps; q in mN; bend as measured, deg; "
-                          "errors in deg and mm (azimuths in the JSON)")
-    headers = ["row", "sweep", "step", "q1, q2, q3", "bend", "Ref. orient.", "Ref. pos."]
-    for header in headers + (["Proposed orient."] if online is not None else []):
-        table.add_column(header, justify="right", no_wrap=header.startswith("q"))
+    table = render.table(f"Worst poses of Ref. ({evaluation.model.name})",
+                         labels=("row", "sweep", "step", "q1, q2, q3"),
+                         numbers=["bend", "Ref. orient.", "Ref. pos.",
+                                  *(["Proposed orient."] if online is not None else [])],
+                         caption="row: index among the compared steps; q in mN; bend as measured, deg; "
+                                 "errors in deg and mm (azimuths in the JSON)")
     for pose in worst:
         cells = [str(pose.index), str(pose.sweep), str(pose.step),
                  ", ".join(f"{force * 1e3:.0f}" for force in pose.jet_forces_n), f"{pose.bend_deg:.1f}",
@@ -251,11 +226,10 @@ def print_before_after(console: Console, before: Evaluation, after: Evaluation) 
     console.print(f"before: {before.label}\nafter:  {after.label}")
     for key in after.results:
         old, new = before.results[key], after.results[key]
-        table = Table(title=f"{LABELS[key]} RMS errors before -> after")
-        table.add_column("group", no_wrap=True)
-        for quantity in ("orient. (deg)", "pos. (mm)"):
-            for column in ("before", "after", "change"):
-                table.add_column(f"{quantity} {column}" if column == "before" else column, justify="right")
+        table = render.table(f"{LABELS[key]} RMS errors before -> after", labels=("group",),
+                             numbers=[f"{quantity} {column}" if column == "before" else column
+                                      for quantity in ("orient. (deg)", "pos. (mm)")
+                                      for column in ("before", "after", "change")])
 
         def row(label: str, pick: Callable[[Comparison], ErrorSummary]) -> None:
             first, second = pick(old), pick(new)
@@ -312,7 +286,4 @@ def write_json(path: Path, steps: Dataset, evaluation: Evaluation, baseline: Eva
     document = figures(evaluation, steps)
     if baseline is not None:
         document["baseline"] = figures(baseline, steps)
-    try:
-        path.write_text(json.dumps(document, indent=2) + "\n")
-    except OSError as error:
-        raise UserError(f"cannot write {path}: {error.strerror}") from None
+    render.write_json(path, document)

@@ -1,4 +1,4 @@
-"""`hydrojet-bench diagnose DATA --model M [--effect NAME ...] [--json F] [--report DIR]`.
+"""`hydrojet-bench diagnose INPUT [--model M] [--effect NAME ...] [--json PATH] [--report DIR]`.
 
 Which physical effect is the model missing? Calibrates the baseline (the model with the
 known --effect's) and the baseline plus each candidate effect on part of the session,
@@ -10,12 +10,10 @@ and names the effect that explains the excess error, if one does
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from rich.console import Console
 from rich.panel import Panel
-from rich.table import Table
 
 from ..analysis.diagnosis import NONE, UNEXPLAINED, Diagnosis, DiagnosisSettings, diagnose
 from ..analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
@@ -23,19 +21,21 @@ from ..analysis.diagnosis.noise import repeatability_floor
 from ..data import load_dataset
 from ..effects import load_effect
 from ..errors import ConvergenceError, UserError
-from .common import add_data_arguments, add_model_arguments, build_model, load_steps
+from ..model_choice import COSSERAT, ModelChoice, model_choice
+from . import render
+from .common import add_input_arguments, add_model_arguments, load_steps
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("diagnose", help="which effect is the model missing? (cross-validated)")
-    add_data_arguments(parser)
-    add_model_arguments(parser)
+    add_input_arguments(parser)
+    add_model_arguments(parser, default=COSSERAT.model)
     parser.add_argument("--candidate", action="append", default=[], metavar="NAME",
                         help="an effect to try (library name or path/to/file.py:Class; repeatable; "
                              "default: every library effect not given with --effect)")
     parser.add_argument("--workers", type=int, default=None,
                         help="processes for the candidate fits (default: up to 2)")
-    parser.add_argument("--json", type=Path, metavar="FILE", help="write the diagnosis as JSON")
+    render.add_json_argument(parser, "the diagnosis")
     parser.add_argument("--report", type=Path, metavar="DIR", help="write figures (PNG) to this folder")
     parser.epilog = ("--effect names effects known to be present: they join the baseline (gravity at its nominal "
                      "weight, E0, EL, L, w_d) and are calibrated with it. Every --candidate is then tried on top.")
@@ -45,18 +45,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.workers is not None and args.workers < 1:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
-    _, known = build_model(args.model, args.effect)  # validates --effect before the data is read
+    choice = model_choice(args)  # validates --effect before the data is read
     candidates = tuple(load_effect(spec) for spec in dict.fromkeys(args.candidate)) or None
-    profile, steps = load_steps(args)
-    console = Console()
-    diagnosis = _diagnose(args, profile, steps, known, candidates, Console(stderr=True))
+    profile, steps = load_steps(args.input, args.profile)
+    console = render.console_for(args)
+    diagnosis = _diagnose(args, profile, steps, choice, candidates, Console(stderr=True))
     print_diagnosis(console, diagnosis, args)
     if args.json:
-        document = {"data": str(args.data), **diagnosis.as_dict()}
-        try:
-            args.json.write_text(json.dumps(document, indent=2) + "\n")
-        except OSError as error:
-            raise UserError(f"cannot write {args.json}: {error.strerror}") from None
+        render.write_json(args.json, {"data": str(args.input), **diagnosis.as_dict()})
     if args.report:
         from ..analysis.diagnosis.plots import write_diagnosis_report
 
@@ -65,19 +61,20 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _diagnose(args: argparse.Namespace, profile, steps, known, candidates, progress: Console) -> Diagnosis:
+def _diagnose(args: argparse.Namespace, profile, steps, choice: ModelChoice, candidates,
+              progress: Console) -> Diagnosis:
     # Without repeated sweeps the raw samples' scatter is the only noise floor left, and
     # only then is the file read a second time for them.
-    samples = load_dataset(args.data, profile) if repeatability_floor(steps) is None else None
+    samples = load_dataset(args.input, profile) if repeatability_floor(steps) is None else None
 
     def say(message: str) -> None:
         progress.print(f"[dim]{message}[/]", highlight=False)
 
     try:
-        return diagnose(steps, args.model, known, candidates, samples=samples,
+        return diagnose(steps, choice.model.name, choice.requested, candidates, samples=samples,
                         settings=DiagnosisSettings(workers=args.workers), progress=say)
     except ConvergenceError as error:
-        raise UserError(f"{args.data}: the baseline {args.model} model cannot follow these data ({error}); "
+        raise UserError(f"{args.input}: the baseline {choice.model.name} model cannot follow these data ({error}); "
                         "check --profile and the units of the jet forces") from None
 
 
@@ -85,18 +82,17 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
     noise = diagnosis.noise
     window = ("" if noise.window_orientation_deg is None
               else f"; within-window scatter gives {noise.window_orientation_deg:.3f} deg")
-    console.print(f"{diagnosis.model} on {args.data}: {diagnosis.split.description}.")
+    console.print(f"{diagnosis.model} on {args.input}: {diagnosis.split.description}.")
     console.print(f"Noise floor {diagnosis.noise_floor_deg:.3f} deg ({noise.method}, {noise.dof} dof{window}); "
                   f"the baseline's held-out error is {diagnosis.baseline_heldout_rmse_deg:.3f} deg "
                   f"(at the floor up to {diagnosis.at_floor_threshold_deg:.3f} deg).")
-    table = Table(title="Candidates, best score first: held-out orientation RMSE before (baseline) and after",
-                  caption="explained: share of the baseline's excess squared error over the floor it removes; "
-                          "score: BIC on the training residuals, change from the baseline (lower is better); "
-                          "online: cosine of its signature with the online disturbance estimate")
-    for column, justify in (("effect", "left"), ("before deg", "right"), ("after deg", "right"),
-                            ("explained", "right"), ("score change", "right"), ("online", "right"),
-                            ("fitted parameters", "left")):
-        table.add_column(column, justify=justify)
+    table = render.table("Candidates, best score first: held-out orientation RMSE before (baseline) and after",
+                         labels=("effect",),
+                         numbers=("before deg", "after deg", "explained", "score change", "online"),
+                         caption="explained: share of the baseline's excess squared error over the floor it "
+                                 "removes; score: BIC on the training residuals, change from the baseline (lower "
+                                 "is better); online: cosine of its signature with the online disturbance estimate")
+    table.add_column("fitted parameters")
     for candidate in diagnosis.ranking:
         style = "bold green" if candidate.effect == diagnosis.verdict else ("" if candidate.qualifies else "dim")
         if candidate.error is not None:
@@ -132,7 +128,7 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
 
 
 def _next_steps(diagnosis: Diagnosis, args: argparse.Namespace) -> str:
-    data = str(args.data) + (f" --profile {args.profile}" if args.profile else "")
+    data = str(args.input) + (f" --profile {args.profile}" if args.profile else "")
     options = f" --model {diagnosis.model}" + "".join(f" --effect {spec}" for spec in args.effect)
     if diagnosis.verdict == NONE:
         return f"Next: the model is complete for these data; calibrate it with `calibrate {data}{options} -o p.toml`."

@@ -10,7 +10,6 @@ asserts a time.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import sys
@@ -21,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UserError
+from . import render
 
 TARGETS_US = {
     "cosserat_warm_solve": 20.0,
@@ -36,7 +36,7 @@ SPEEDUP_TARGET = 300.0
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("perf", help="benchmark the model kernels (JSON)")
-    parser.add_argument("--json", metavar="FILE", type=Path, help="also write the figures to FILE")
+    render.add_json_argument(parser, "the printed figures")
     parser.add_argument("--runs", type=int, default=500, help="timed runs per figure (default 500, min 200)")
     parser.set_defaults(func=run)
 
@@ -196,11 +196,7 @@ def run(args: argparse.Namespace) -> int:
     if args.runs < 200:
         raise UserError(f"--runs must be at least 200 (got {args.runs}): medians of fewer are noise")
     results = benchmark(args.runs)
-    text = json.dumps(results, indent=2)
-    print(text)
-    if args.json:
-        try:
-            args.json.write_text(text + "\n")
-        except OSError as error:
-            raise UserError(f"cannot write {args.json}: {error.strerror}") from None
+    render.write_json(Path(render.STDOUT), results)
+    if args.json and str(args.json) != render.STDOUT:
+        render.write_json(args.json, results)
     return 0

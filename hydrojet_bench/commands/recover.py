@@ -1,4 +1,4 @@
-"""`hydrojet-bench recover LOG [-o OUT]`: rewrite a session log that a crash left
+"""`hydrojet-bench recover INPUT [-o OUT]`: rewrite a session log that a crash left
 unfinished (or any damaged MCAP file) into a valid, finished one.
 
 Everything whole before the damage is kept; the output opens in any MCAP reader and in
@@ -17,15 +17,15 @@ from ..logs import recover_log, recovered_path
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("recover", help="rewrite an unfinished or damaged session log into a valid one")
-    parser.add_argument("log", type=Path, help="the session log (.mcap), possibly cut off by a crash")
+    parser.add_argument("input", type=Path, metavar="INPUT", help="a session log (.mcap), possibly cut off by a crash")
     parser.add_argument("-o", "--output", type=Path, default=None,
-                        help="where to write (default: LOG with .recovered.mcap instead of .mcap)")
+                        help="where to write (default: INPUT with .recovered.mcap instead of .mcap)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    output = args.output or recovered_path(args.log)
-    report = recover_log(args.log, output)
+    output = args.output or recovered_path(args.input)
+    report = recover_log(args.input, output)
     if report.first_t_s is None or report.last_t_s is None:
         span = "no messages"
     else:
@@ -34,6 +34,6 @@ def run(args: argparse.Namespace) -> int:
     state = ("was truncated (unfinished or damaged); kept everything before the damage" if report.truncated
              else "was complete")
     console = Console()
-    console.print(f"{args.log} {state}", highlight=False, soft_wrap=True)
+    console.print(f"{args.input} {state}", highlight=False, soft_wrap=True)
     console.print(f"wrote {output}: {span}", highlight=False, soft_wrap=True)
     return 0

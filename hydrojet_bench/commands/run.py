@@ -22,12 +22,11 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 
-from ..effects import qualified_parameter_names
 from ..errors import UserError
-from ..estimation.calibration import DEFAULT_NAMES
-from ..params_io import read_parameter_file
+from ..model_choice import ModelDefaults, model_choice
 from ..profile import load_profile
-from .common import build_model
+from . import render
+from .common import add_model_arguments
 
 DEFAULT_LOG_DIR = Path("sessions")
 
@@ -39,10 +38,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="paper (default), calibration, sweeps, imu-vs-em, hold[:SECONDS], or a .csv/.toml plan file")
     parser.add_argument("--log", type=Path, metavar="FILE",
                         help=f"MCAP log to write (default: {DEFAULT_LOG_DIR}/<profile>-<time>.mcap)")
-    parser.add_argument("--model", choices=("cosserat", "prb"), help="kinematic model (default: the profile's)")
-    parser.add_argument("--effect", action="append", default=[], metavar="NAME",
-                        help="add an effect to the model: a library name or path/to/file.py:Class (repeatable)")
-    parser.add_argument("--params", type=Path, help="start from these calibrated parameters (from `calibrate`)")
+    add_model_arguments(parser, default="the profile's [estimator] model",
+                        params="start from these calibrated parameters (default: the profile's nominal ones)")
     parser.add_argument("--no-calibration", action="store_true",
                         help="do not calibrate on the plan's calibration poses")
     parser.add_argument("--time-scale", type=float, metavar="X",
@@ -67,26 +64,19 @@ def run(args: argparse.Namespace) -> int:
             raise UserError("--time-scale applies to the simulated rig only; this profile drives real devices")
         settings = replace(settings, timing=replace(settings.timing, time_scale=args.time_scale))
     plan = choose_plan(args.plan, settle_s=settings.timing.settle_s)
-    model_name = args.model or settings.estimator.model
-    effect_specs = list(settings.estimator.effects) + args.effect
-    params = profile.model_parameters()
-    if args.params is not None:
-        parameter_file = read_parameter_file(args.params)
-        params = parameter_file.apply(params, args.params)
-        effect_specs = list(parameter_file.effects) + effect_specs
-        model_name = args.model or parameter_file.model
-    model, requested = build_model(model_name, effect_specs)
-    names = DEFAULT_NAMES + tuple(name for effect in requested for name in qualified_parameter_names(effect))
+    choice = model_choice(args, ModelDefaults(settings.estimator.model, tuple(settings.estimator.effects)))
+    model, requested = choice.model, choice.requested
     log_path = args.log or DEFAULT_LOG_DIR / f"{profile.name}-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
     try:
         log_path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as error:
         raise UserError(f"cannot create the log folder {log_path.parent}: {error.strerror}") from None
     request = SessionRequest(profile=profile, settings=settings, plan=plan, log_path=log_path, model=model,
-                             effects=tuple(dict.fromkeys(effect_specs)), params=params,
-                             calibrate=not args.no_calibration, calibration_names=names, seed=args.seed,
+                             effects=choice.effect_specs, params=choice.parameters(profile.model_parameters()),
+                             calibrate=not args.no_calibration, calibration_names=choice.calibration_names,
+                             seed=args.seed,
                              command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]))
-    console = Console()
+    console = render.console_for(args)
     console.print(f"session on [bold]{profile.name}[/] ({'simulated rig' if settings.transports.simulated else 'rig'}): "
                   f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.timing.time_scale:g}, "
                   f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; log {log_path}")

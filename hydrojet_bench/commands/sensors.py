@@ -1,4 +1,4 @@
-"""`hydrojet-bench sensors LOG [--report DIR] [--json FILE]`: the IMUs against the EM tracker.
+"""`hydrojet-bench sensors INPUT [--report DIR] [--json PATH]`: the IMUs against the EM tracker.
 
 Compares the tip orientation relative to the base measured by the two ICM-20948s
 (Madgwick-fused) with the EM tracker's over a session log: RMS and largest angle,
@@ -17,20 +17,19 @@ from pathlib import Path
 
 import numpy as np
 from rich.console import Console
-from rich.table import Table
 
 from ..analysis.sensors import (AXES, DEFAULT_MIN_HOLD_S, DEFAULT_SETTLE_S, METHODS, AngleSummary,
                                 EstimatorComparison, SensorAgreement, compare_estimators, imu_profile,
                                 sensor_agreement, write_sensor_report)
 from ..data.dataset import Dataset
-from ..effects import qualified_parameter_names
 from ..errors import ConvergenceError, UserError
 from ..estimation import OnlineSettings
-from ..estimation.calibration import DEFAULT_NAMES, calibrate_dataset
+from ..estimation.calibration import calibrate_dataset
 from ..logs import read_log
 from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log
-from ..params_io import read_parameter_file
-from .common import build_model
+from ..model_choice import ModelDefaults, model_choice
+from . import render
+from .common import SESSION_LOG, add_input_arguments, add_model_arguments
 
 SHORT_LABELS = {"ref": "Ref.", "online_em": "Proposed, fed by EM", "online_imu": "Proposed, fed by IMU"}
 
@@ -38,21 +37,17 @@ SHORT_LABELS = {"ref": "Ref.", "online_em": "Proposed, fed by EM", "online_imu":
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("sensors", help="IMU against EM tracker over a session log, and whether the "
                                    "IMUs are good enough for online estimation")
-    parser.add_argument("log", type=Path, help="session log (.mcap) from `hydrojet-bench run` with IMUs and EM tracker")
-    parser.add_argument("--profile", help="rig profile (default: the one embedded in the log)")
-    parser.add_argument("--model", choices=("cosserat", "prb"),
-                        help="kinematic model for the estimation (default: the parameter file's, else the live one)")
-    parser.add_argument("--effect", action="append", default=[], metavar="NAME",
-                        help="add an effect: a library name or path/to/file.py:Class (repeatable)")
-    parser.add_argument("--params", type=Path,
-                        help="parameter file from `calibrate` (default: calibrate on the log's EM calibration poses)")
+    add_input_arguments(parser, SESSION_LOG + " with IMUs and EM tracker")
+    add_model_arguments(parser, default="the live one",
+                        params="the parameters for the estimation (default: calibrate on the log's EM "
+                               "calibration poses)")
     parser.add_argument("--min-hold", type=float, default=DEFAULT_MIN_HOLD_S, metavar="S",
                         help=f"a command held at least this long is a static pose (default {DEFAULT_MIN_HOLD_S:g} s)")
     parser.add_argument("--settle", type=float, default=DEFAULT_SETTLE_S, metavar="S",
                         help=f"ignore the first S seconds of each hold (default {DEFAULT_SETTLE_S:g} s)")
     parser.add_argument("--max-gap", type=float, metavar="S",
                         help="largest EM gap to interpolate across (default: 1.5 EM periods)")
-    parser.add_argument("--json", type=Path, metavar="FILE", help="write the figures as JSON")
+    render.add_json_argument(parser)
     parser.add_argument("--report", type=Path, metavar="DIR", help="write figures (PNG) to this folder")
     parser.set_defaults(func=run)
 
@@ -62,23 +57,20 @@ def run(args: argparse.Namespace) -> int:
         value = getattr(args, option)
         if value is not None and not (np.isfinite(value) and value >= 0):
             raise UserError(f"--{option.replace('_', '-')} must be a number of seconds >= 0, got {value}")
-    em, imu, metadata = load_sources(args.log, args.profile)
-    console = Console()
+    em, imu, metadata = load_sources(args.input, args.profile)
+    console = render.console_for(args)
     try:
         agreement = sensor_agreement(imu, em, args.max_gap, args.min_hold, args.settle)
     except ValueError as error:
-        raise UserError(f"{args.log}: cannot align the IMU and EM samples: {error}") from None
-    print_agreement(console, agreement, args.log)
+        raise UserError(f"{args.input}: cannot align the IMU and EM samples: {error}") from None
+    print_agreement(console, agreement, args.input)
     estimation, model_line = estimate(args, em, imu, metadata.get("bench", {}), console)
     if estimation is not None:
         print_estimation(console, estimation, model_line)
     if args.json:
-        document = {"log": str(args.log), **agreement.as_dict(),
-                    "online_estimation": None if estimation is None else {"model": model_line, **estimation.as_dict()}}
-        try:
-            args.json.write_text(json.dumps(document, indent=2) + "\n")
-        except OSError as error:
-            raise UserError(f"cannot write {args.json}: {error.strerror}") from None
+        render.write_json(args.json, {
+            "log": str(args.input), **agreement.as_dict(),
+            "online_estimation": None if estimation is None else {"model": model_line, **estimation.as_dict()}})
     if args.report:
         for path in write_sensor_report(args.report, agreement):
             console.print(f"wrote {path}")
@@ -103,36 +95,33 @@ def estimate(args: argparse.Namespace, em: Dataset, imu: Dataset, bench: dict[st
     """The online estimator fed by each source (None, with a note, when there is
     nothing to calibrate on), and a line naming the model and its parameters."""
     em_steps, imu_steps = em.quasistatic_steps(), imu.quasistatic_steps()
-    model_name = args.model or bench.get("model", "cosserat")
-    effect_specs = list(json.loads(bench.get("effects", "[]"))) + args.effect
+    live = ModelDefaults(bench.get("model", "cosserat"), tuple(json.loads(bench.get("effects", "[]"))))
+    choice = model_choice(args, live)
+    model = choice.model
     base = em.profile.model_parameters()
     if args.params is not None:
-        parameter_file = read_parameter_file(args.params)
-        params = parameter_file.apply(base, args.params)
-        effect_specs = list(parameter_file.effects) + args.effect
-        model, _ = build_model(args.model or parameter_file.model, effect_specs)
+        params = choice.parameters(base)
         origin = f"parameters from {args.params}"
     else:
-        model, requested = build_model(model_name, effect_specs)
         poses = em_steps.calibration_rows().valid_rows()
         if len(poses) == 0:
             console.print("[yellow]no EM calibration poses (sweep -1) in the log and no --params: "
                           "online estimation skipped[/]")
             return None, ""
-        names = DEFAULT_NAMES + tuple(n for effect in requested for n in qualified_parameter_names(effect))
         try:
-            calibration = calibrate_dataset(model, poses, base, names)
+            calibration = calibrate_dataset(model, poses, base, choice.calibration_names)
         except (ValueError, ConvergenceError) as error:
-            raise UserError(f"{args.log}: cannot calibrate {model.name} on the EM calibration poses: {error}") from None
+            raise UserError(f"{args.input}: cannot calibrate {model.name} on the EM calibration poses: "
+                            f"{error}") from None
         params = calibration.params
         origin = (f"calibrated on {len(poses)} EM poses, RMS {calibration.rms_orientation_deg_before:.2f} -> "
                   f"{calibration.rms_orientation_deg_after:.2f} deg")
     try:
         comparison = compare_estimators(model, params, em_steps, imu_steps, OnlineSettings())
     except ValueError as error:
-        raise UserError(f"{args.log}: {error}") from None
+        raise UserError(f"{args.input}: {error}") from None
     except ConvergenceError as error:
-        raise UserError(f"{args.log}: {model.name} did not converge on a logged step: {error}") from None
+        raise UserError(f"{args.input}: {model.name} did not converge on a logged step: {error}") from None
     effects = ", ".join(effect.name for effect in model.effects)
     return comparison, f"{model.name} ({effects}); {origin}"
 
@@ -150,14 +139,13 @@ def _hz(rate: float | None) -> str:
 
 def print_agreement(console: Console, agreement: SensorAgreement, log: Path) -> None:
     aligned, axes = agreement.aligned, agreement.axes
-    table = Table(title=f"IMU against EM: tip orientation in the base frame, {log}",
-                  caption=f"{len(aligned)} of {aligned.imu_samples} IMU samples ({_hz(aligned.imu_rate_hz)}) aligned "
-                          f"with {aligned.em_samples} EM samples ({_hz(aligned.em_rate_hz)}), slerped to the IMU "
-                          f"stamps across gaps up to {aligned.max_gap_s * 1e3:.0f} ms; held: settled part of holds "
-                          f"of >= {agreement.min_hold_s:g} s after {agreement.settle_s:g} s")
-    table.add_column("samples", no_wrap=True)
-    for header in ("n", "RMS (deg)", "mean (deg)", "max (deg)"):
-        table.add_column(header, justify="right")
+    table = render.table(
+        f"IMU against EM: tip orientation in the base frame, {log}", labels=("samples",),
+        numbers=("n", "RMS (deg)", "mean (deg)", "max (deg)"),
+        caption=f"{len(aligned)} of {aligned.imu_samples} IMU samples ({_hz(aligned.imu_rate_hz)}) aligned "
+                f"with {aligned.em_samples} EM samples ({_hz(aligned.em_rate_hz)}), slerped to the IMU "
+                f"stamps across gaps up to {aligned.max_gap_s * 1e3:.0f} ms; held: settled part of holds "
+                f"of >= {agreement.min_hold_s:g} s after {agreement.settle_s:g} s")
 
     def row(label: str, summary: AngleSummary | None) -> None:
         if summary is None:
@@ -171,11 +159,10 @@ def print_agreement(console: Console, agreement: SensorAgreement, log: Path) -> 
     row("moving", agreement.moving)
     console.print(table)
 
-    table = Table(title="Per-axis error (IMU relative to EM, rotation vector in the base frame)",
-                  caption="heading: about up (against gravity), where the magnetometers and gyros rule; "
-                          "tilt: the rest, pinned by gravity")
-    for header in ("component", "RMS (deg)", "mean (deg)", "drift (deg/min)"):
-        table.add_column(header, justify="right" if header != "component" else "left")
+    table = render.table("Per-axis error (IMU relative to EM, rotation vector in the base frame)",
+                         labels=("component",), numbers=("RMS (deg)", "mean (deg)", "drift (deg/min)"),
+                         caption="heading: about up (against gravity), where the magnetometers and gyros rule; "
+                                 "tilt: the rest, pinned by gravity")
     for i, axis in enumerate(AXES):
         table.add_row(f"base {axis}", _deg(axes.rms_deg[i]), _deg(axes.mean_deg[i], signed=True), "")
     table.add_row("heading", _deg(axes.heading_rms_deg), _deg(axes.heading_mean_deg, signed=True),
@@ -188,13 +175,12 @@ def print_agreement(console: Console, agreement: SensorAgreement, log: Path) -> 
     if not agreement.holds:
         console.print(f"no static hold (a command held >= {agreement.min_hold_s:g} s); see --min-hold")
         return
-    table = Table(title="Static accuracy: settled part of each hold",
-                  caption="angles in deg; bias: between the mean orientations; heading signed; trend in "
-                          "deg/min; across holds "
-                          f"{_deg(agreement.across_holds_deg_per_min, signed=True)}, within holds (mean) "
-                          f"{_deg(agreement.within_holds_deg_per_min, signed=True)}")
-    for header in ("hold", "q (mN)", "n", "mean", "SD", "bias", "heading", "tilt", "trend"):
-        table.add_column(header, justify="right", no_wrap=True)
+    table = render.table("Static accuracy: settled part of each hold", labels=("hold", "q (mN)"),
+                         numbers=("n", "mean", "SD", "bias", "heading", "tilt", "trend"),
+                         caption="angles in deg; bias: between the mean orientations; heading signed; trend in "
+                                 "deg/min; across holds "
+                                 f"{_deg(agreement.across_holds_deg_per_min, signed=True)}, within holds (mean) "
+                                 f"{_deg(agreement.within_holds_deg_per_min, signed=True)}")
     for hold in agreement.holds:
         table.add_row(f"{hold.sweep}/{hold.step}", ",".join(f"{f * 1e3:.0f}" for f in hold.jet_forces_n),
                       str(hold.angle.count), _deg(hold.angle.mean_deg), _deg(hold.sd_deg), _deg(hold.bias_deg),
@@ -204,11 +190,10 @@ def print_agreement(console: Console, agreement: SensorAgreement, log: Path) -> 
 
 
 def print_estimation(console: Console, estimation: EstimatorComparison, model_line: str) -> None:
-    table = Table(title=f"Online estimation fed by EM or by IMU, scored against EM ({len(estimation.steps)} "
-                        "settled steps)",
-                  caption=f"{model_line}; gain: cut in RMS error from Ref. (constant disturbance)")
-    for header in ("method", "orient. RMSE (deg)", "gain", "pos. RMSE (mm)", "gain"):
-        table.add_column(header, justify="right" if header != "method" else "left", no_wrap=True)
+    table = render.table(f"Online estimation fed by EM or by IMU, scored against EM ({len(estimation.steps)} "
+                         "settled steps)", labels=("method",),
+                         numbers=("orient. RMSE (deg)", "gain", "pos. RMSE (mm)", "gain"),
+                         caption=f"{model_line}; gain: cut in RMS error from Ref. (constant disturbance)")
     for method in METHODS:
         summary = estimation.results[method].overall
         gain = position_gain = None

@@ -1,10 +1,12 @@
-"""The two kinematic models of the paper, solved by shooting on the clamp wrench.
+"""The two kinematic models of the paper, solved by shooting from the tip.
 
 `CosseratModel` is the Kirchhoff-Cosserat rod of eqs. 17-23 (inextensible and
 unshearable, v = e3), integrated with fixed-step RK4. `PrbModel` is the pseudo-rigid-body
 chain of eqs. 6-16: n + 1 rigid links and n spherical joints whose stiffness follows
 eq. 10 with the linear E profile. Both compose the same effects through `RodProblem`, and
-both return a `Solution` with the backbone and the tip pose in the base frame.
+both return a `Solution` with the backbone and the tip pose in the base frame. The
+unknown is the tip orientation (three numbers); the tip wrench follows from it and the
+residual is the clamp's orientation error (`hydrojet_bench.models.kernels`).
 
 A solve is warm-started from a nearby `Solution` when one is given (its tip orientation
 and its solver matrix), and falls back to load ramping (continuation from the straight
@@ -389,10 +391,10 @@ class PrbModel(ShootingModel):
     rule out, so we read it as a typesetting slip.) The spring acts on the joint's
     rotation vector, with the joint's axes fixed in the distal link, theta_j = K_j^-1
     R_j^T m_j: the joint torque of eqs. 14-15, J^T w, is exactly that moment about the
-    joint's axes, so
-    the chain satisfies eq. 16's K theta = tau_f + tau_a (tested against explicit
-    Jacobians). Equilibrium is found by the same Newton iteration on the clamp wrench
-    as the Cosserat model: six unknowns instead of 3n.
+    joint's axes, so the chain satisfies eq. 16's K theta = tau_f + tau_a (tested against
+    explicit Jacobians). Equilibrium is found by the same Newton iteration as the
+    Cosserat model, shooting from the tip: three unknowns (the tip orientation) instead
+    of 3n joint angles.
     """
 
     kind = kernels.PRB

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from hydrojet_bench.analysis.sensors import (align, compare_estimators, imu_profile, matched_steps,
                                             sensor_agreement, settled_holds, slerp)
-from hydrojet_bench.commands.common import build_model
+from hydrojet_bench.model_choice import build_model
 from hydrojet_bench.data.dataset import Dataset, SampleFlag
 from hydrojet_bench.geometry import matrix_from_quat, quat_from_rotvec, quat_multiply, rotation_angle_deg
 from hydrojet_bench.plans import calibration_plan, validation_sweeps

@@ -15,7 +15,7 @@ from hydrojet_bench.bench.replay import live_difference_deg, read_session, repla
 from drivers.transport.sim import unregister_device
 from hydrojet_bench.bench.session import Session, SessionAborted, SessionRequest
 from hydrojet_bench.bench.settings import bench_settings
-from hydrojet_bench.commands.common import build_model
+from hydrojet_bench.model_choice import build_model
 from hydrojet_bench.estimation import OnlineSettings
 from hydrojet_bench.logs import read_log
 from hydrojet_bench.plans import calibration_plan, validation_sweeps

@@ -82,6 +82,10 @@ def test_without_baseline_the_figures_keep_their_keys(calibrated, capsys):
     for key in TABLE_2_KEYS | BREAKDOWN_KEYS - {"parameters"}:
         assert set(figures[key]) == {"ref"}, key
     assert "before -> after" not in capsys.readouterr().out
+    # `--json -`: the document alone on standard output, the tables on standard error.
+    assert main(["compare", str(data), "--params", str(before), "--json", "-"]) == 0
+    printed = capsys.readouterr()
+    assert json.loads(printed.out) == figures and "RMS errors" in printed.err
 
 
 def test_a_file_effect_named_in_parameters_needs_its_file(calibrated, capsys):

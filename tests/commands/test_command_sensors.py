@@ -13,7 +13,7 @@ import pytest
 from hydrojet_bench.bench.session import Session, SessionRequest
 from hydrojet_bench.bench.settings import bench_settings
 from hydrojet_bench.cli import main
-from hydrojet_bench.commands.common import build_model
+from hydrojet_bench.model_choice import build_model
 from hydrojet_bench.logs import LogWriter
 from hydrojet_bench.plans import calibration_plan, validation_sweeps
 from hydrojet_bench.profile import load_profile

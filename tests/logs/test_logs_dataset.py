@@ -3,7 +3,6 @@ commands' loaders accept logs and their embedded profiles."""
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
@@ -85,11 +84,11 @@ def test_the_embedded_profile_is_used_unless_one_is_given(tmp_path: Path) -> Non
     assert dataset_from_log(path, "hydrojet-v1").profile.name == "hydrojet-v1"
     # The analysis commands' loaders: load_dataset, and load_steps without --profile.
     assert load_dataset(path, None).profile.name == "sim"
-    profile, steps = load_steps(argparse.Namespace(data=path, profile=None))
+    profile, steps = load_steps(path, None)
     assert profile.name == "sim" and len(steps) == 60 // 5
     csv = tmp_path / "rows.csv"
     write_csv(recorded_rows(), csv)
-    assert load_steps(argparse.Namespace(data=csv, profile=None))[0].name == "sim"  # CSV keeps its default
+    assert load_steps(csv, None)[0].name == "sim"  # CSV keeps its default
 
 
 def test_a_truncated_log_gives_the_samples_before_the_cut(tmp_path: Path) -> None:

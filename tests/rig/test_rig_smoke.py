@@ -1,10 +1,11 @@
 """Read-only smoke checks of a rig's devices: `pytest --rig profiles/hydrojet-v1.toml`.
 
-Skipped unless --rig names a profile. Nothing here opens a valve: the valve controller
-is armed (as every session does), asked for its status and sent ALL_OFF on close. The
-tracker and the IMUs are only read. A profile whose devices are "sim"/"pty" runs the same
-checks against the emulators (`pytest --rig profiles/sim.toml tests/rig`), which is how
-`make test` keeps these tests honest without hardware.
+Skipped unless --rig names a profile. Nothing here opens a valve: the rig is opened as
+every session opens it (`bench.rig.open_rig`: valve controller armed, ALL_OFF on close),
+the valve controller is asked for its status, the tracker and the IMUs are only read. A
+profile whose devices are "sim"/"pty" runs the same checks against the emulators
+(`pytest --rig profiles/sim.toml tests/rig`), which is how `make test` keeps these tests
+honest without hardware.
 """
 
 from __future__ import annotations
@@ -14,43 +15,28 @@ import contextlib
 import numpy as np
 import pytest
 
-from drivers.aurora.client import AuroraTracker
-from drivers.imu import Icm20948
-from drivers.valve.client import ValveController
 from hydrojet_bench.bench.clock import ScaledClock
-from hydrojet_bench.bench.settings import SIM, bench_settings
-from hydrojet_bench.bench.simulated_rig import simulated_devices
+from hydrojet_bench.bench.rig import open_rig
+from hydrojet_bench.bench.settings import bench_settings
 from hydrojet_bench.profile import load_profile
 
 pytestmark = pytest.mark.rig
 
 
 @contextlib.asynccontextmanager
-async def rig_devices(profile_spec: str):
-    """(profile, settings, valves URL, tracker URL, I2C bus) of the rig under test."""
+async def rig_under_test(profile_spec: str):
     profile = load_profile(profile_spec)
-    settings = bench_settings(profile)
-    transports = settings.transports
-    async with contextlib.AsyncExitStack() as stack:
-        valves, tracker, bus = transports.valves, transports.tracker, None
-        if transports.simulated:
-            devices = await stack.enter_async_context(simulated_devices(profile, settings, ScaledClock()))
-            valves, tracker, bus = devices.valves_url or valves, devices.tracker_url or tracker, devices.imu_bus
-        if transports.imu_bus != SIM:
-            import smbus2
-
-            bus = stack.enter_context(smbus2.SMBus(transports.imu_bus))
-        yield profile, settings, valves, tracker, bus
+    async with open_rig(profile, bench_settings(profile), ScaledClock()) as rig:
+        yield rig
 
 
 def test_valve_controller_answers_status_with_valves_closed(rig_profile, run_async):
     async def check():
-        async with rig_devices(rig_profile) as (_, settings, valves_url, _, _):
-            async with ValveController(valves_url, calibrations=settings.valves.calibrations) as valves:
-                status = await valves.status()
-                assert status.armed and not status.faults
-                assert status.duties_permille == (0, 0, 0), "valves open before any command"
-                return status
+        async with rig_under_test(rig_profile) as rig:
+            status = await rig.valves.status()
+            assert status.armed and not status.faults
+            assert status.duties_permille == (0, 0, 0), "valves open before any command"
+            return status
 
     status = run_async(check, timeout_s=30.0)
     assert status.firmware_version >= (1, 0)
@@ -58,10 +44,8 @@ def test_valve_controller_answers_status_with_valves_closed(rig_profile, run_asy
 
 def test_tracker_sees_base_and_tip_and_counts_frames(rig_profile, run_async):
     async def check():
-        async with rig_devices(rig_profile) as (_, settings, _, tracker_url, _):
-            async with AuroraTracker(tracker_url, list(settings.tracker.tools)) as tracker:
-                frames = [await tracker.read_frame() for _ in range(3)]
-                return frames
+        async with rig_under_test(rig_profile) as rig:
+            return [await rig.tracker.read_frame() for _ in range(3)]
 
     frames = run_async(check, timeout_s=30.0)
     for frame in frames:
@@ -73,13 +57,9 @@ def test_tracker_sees_base_and_tip_and_counts_frames(rig_profile, run_async):
 
 def test_both_imus_answer_and_measure_gravity(rig_profile, run_async):
     async def check():
-        async with rig_devices(rig_profile) as (_, settings, _, _, bus):
-            samples = []
-            for address in (settings.imu.base_address, settings.imu.tip_address):
-                chip = Icm20948(bus, address)
-                chip.initialize()
-                samples.append(chip.read_sample())
-            return samples
+        async with rig_under_test(rig_profile) as rig:
+            assert rig.imus is not None, "the profile names no IMU bus"
+            return [await chip.read_sample() for chip in (rig.imus.base, rig.imus.tip)]
 
     for sample in run_async(check, timeout_s=30.0):
         # At rest the accelerometer reads gravity alone: 9.81 m/s^2 within a few percent.

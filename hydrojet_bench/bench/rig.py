@@ -1,0 +1,116 @@
+"""The rig's devices, opened per the profile's ``[transports]`` and closed safely.
+
+`open_rig` is the one place that wires the valve controller, the EM tracker and the IMU
+pair: emulated on the digital twin (``"sim"``/``"pty"``, `bench.simulated_rig`) or real
+(a serial URL, an I2C bus number), in any mix. Its guarantee on every exit path (normal
+end, exception, cancellation): the valve controller is entered last, so it exits first
+and sends ALL_OFF before anything else is torn down.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable
+from dataclasses import dataclass
+
+from drivers.aurora.client import AuroraTracker
+from drivers.imu import AsyncIcm20948, Icm20948, ImuPairFusion
+from drivers.valve.client import ValveController
+
+from ..profile import RigProfile
+from .clock import Clock
+from .settings import SIM, BenchSettings
+from .simulated_rig import SimulatedDevices, simulated_devices
+
+# (level, source, message), as `Session.event` takes them.
+EventSink = Callable[[str, str, str], None]
+
+
+@dataclass(frozen=True)
+class ImuPair:
+    """The base and tip ICM-20948s (gyro bias estimated when the profile asks) and the
+    Madgwick fusion of their samples."""
+
+    base: AsyncIcm20948
+    tip: AsyncIcm20948
+    fusion: ImuPairFusion
+
+
+@dataclass(frozen=True)
+class Rig:
+    """Open devices. imus: None when the profile has no IMU bus; simulated: the twin and
+    emulators behind the emulated devices, None on an all-real rig."""
+
+    valves: ValveController
+    tracker: AuroraTracker
+    imus: ImuPair | None
+    simulated: SimulatedDevices | None
+
+
+async def _nothing() -> None:
+    return None
+
+
+def _ignore(level: str, source: str, message: str) -> None:
+    return None
+
+
+@contextlib.asynccontextmanager
+async def open_rig(profile: RigProfile, settings: BenchSettings, clock: Clock, *, seed: int | None = None,
+                   before_arming: Callable[[], Awaitable[None]] = _nothing,
+                   on_event: EventSink = _ignore) -> AsyncIterator[Rig]:
+    """Open tracker and IMUs, await ``before_arming`` (anything slow that must not run
+    with the valves armed), then arm the valves and yield the `Rig`. seed: the digital
+    twin's noise seed (default: the profile's); on_event: one line per device opened."""
+    transports = settings.transports
+    async with contextlib.AsyncExitStack() as stack:
+        simulated = None
+        valves_url, tracker_url, imu_bus = transports.valves, transports.tracker, None
+        if transports.simulated:
+            simulated = await stack.enter_async_context(simulated_devices(profile, settings, clock, seed))
+            valves_url = simulated.valves_url or valves_url
+            tracker_url = simulated.tracker_url or tracker_url
+            imu_bus = simulated.imu_bus
+            on_event("info", "rig", f"simulated rig: {simulated.twin!r}")
+        if imu_bus is None and transports.imu_bus != SIM:
+            import smbus2  # only a real rig needs it
+
+            imu_bus = stack.enter_context(smbus2.SMBus(transports.imu_bus))
+        tracker = AuroraTracker(tracker_url, list(settings.tracker.tools), use_tx=settings.tracker.use_tx,
+                                clock=clock.now)
+        await stack.enter_async_context(tracker)
+        on_event("info", "tracker", f"tracking {', '.join(tracker.handles)} ({tracker.version_text.strip()[:40]})")
+        imus = None if imu_bus is None else await _open_imus(imu_bus, settings, clock)
+        if imus is not None:
+            on_event("info", "imu", f"ICM-20948 at {settings.imu.base_address:#04x} and "
+                     f"{settings.imu.tip_address:#04x} ready")
+        await before_arming()
+        valve_settings = settings.valves
+        valves = ValveController(valves_url, calibrations=valve_settings.calibrations,
+                                 retries=valve_settings.retries,
+                                 reply_timeout_s=valve_settings.reply_timeout_ms / 1000.0,
+                                 heartbeat_interval_s=valve_settings.heartbeat_ms / 1000.0)
+        # Entered last, so it exits first: ALL_OFF before anything else is torn down.
+        await stack.enter_async_context(valves)
+        on_event("info", "valves", "armed")
+        yield Rig(valves, tracker, imus, simulated)
+
+
+async def _open_imus(bus, settings: BenchSettings, clock: Clock) -> ImuPair:
+    imu = settings.imu
+    # Both chips share one bus: one transfer at a time.
+    lock = threading.Lock()
+    chips = []
+    for address, calibration in ((imu.base_address, imu.base_calibration),
+                                 (imu.tip_address, imu.tip_calibration)):
+        driver = Icm20948(bus, address, clock=clock.now, calibration=calibration,
+                          sleep=lambda seconds: time.sleep(seconds / clock.time_scale))
+        chip = AsyncIcm20948(driver, bus_lock=lock)
+        await chip.initialize()
+        if imu.gyro_bias_samples:
+            await chip.estimate_gyro_bias(imu.gyro_bias_samples)  # applied to the driver's calibration
+        chips.append(chip)
+    return ImuPair(chips[0], chips[1], ImuPairFusion(imu.rate_hz, gain=imu.madgwick_gain,
+                                                     use_magnetometer=imu.use_magnetometer))

@@ -1,0 +1,100 @@
+"""Which model a command runs, with which effects and parameters: one rule for all.
+
+A parameter file (``--params``, written by `calibrate`) brings the model it was
+calibrated for and its effects, in place of the command's defaults (a profile's
+``[estimator]``, a session log's live model, or plain Cosserat); the command line wins:
+``--model`` replaces the model and every ``--effect`` is added to the effects.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from .effects import LIBRARY, Effect, load_effect, qualified_parameter_names
+from .errors import UserError
+from .estimation.calibration import DEFAULT_NAMES
+from .models import make_model
+from .models.shooting import ShootingModel
+from .params import ModelParameters
+from .params_io import ParameterFile, read_parameter_file
+
+
+@dataclass(frozen=True)
+class ModelDefaults:
+    """What a command runs when neither a parameter file nor ``--model`` says: a model
+    name and effect specs (library names or path/to/file.py:Class)."""
+
+    model: str
+    effects: tuple[str, ...] = ()
+
+
+# The default of the commands that have no profile or session log to ask.
+COSSERAT = ModelDefaults("cosserat")
+
+
+@dataclass(frozen=True)
+class ModelChoice:
+    """The model (gravity always included) and, among its effects, the ``requested`` ones
+    whose parameters a calibration fits; ``parameter_file`` was read from
+    ``parameter_path`` when one was given."""
+
+    model: ShootingModel
+    requested: tuple[Effect, ...]
+    effect_specs: tuple[str, ...]
+    parameter_file: ParameterFile | None = None
+    parameter_path: Path | None = None
+
+    @property
+    def calibration_names(self) -> tuple[str, ...]:
+        """E0, EL, L, w_d and the parameters of every requested effect."""
+        return DEFAULT_NAMES + tuple(name for effect in self.requested for name in qualified_parameter_names(effect))
+
+    def parameters(self, nominal: ModelParameters) -> ModelParameters:
+        """``nominal`` (a profile's parameters) with the parameter file's values applied."""
+        if self.parameter_file is None:
+            return nominal
+        return self.parameter_file.apply(nominal, self.parameter_path)
+
+
+def build_model(name: str, effect_specs: Sequence[str]) -> tuple[ShootingModel, tuple[Effect, ...]]:
+    """The model with gravity plus the requested effects, and the requested effects
+    themselves (whose parameters a calibration fits; gravity stays at its nominal weight
+    unless requested)."""
+    requested = tuple(load_effect(spec) for spec in dict.fromkeys(effect_specs))
+    always = () if any(effect.name == "gravity" for effect in requested) else (load_effect("gravity"),)
+    return make_model(name, always + requested), requested
+
+
+def choose_model(model: str | None, effects: Sequence[str], parameter_path: Path | None,
+                 defaults: ModelDefaults = COSSERAT, *, effect_files: Sequence[str] | None = None) -> ModelChoice:
+    """The model per the rule above. An effect the parameter file names that is not in
+    the library is looked up by name among ``effect_files`` (default: ``effects``), the
+    path/to/file.py:Class specs of the command line."""
+    if parameter_path is None:
+        parameter_file = None
+        name, base_specs = model or defaults.model, list(defaults.effects)
+    else:
+        parameter_file = read_parameter_file(parameter_path)
+        name, base_specs = model or parameter_file.model, _file_effect_specs(
+            parameter_file, parameter_path, effects if effect_files is None else effect_files)
+    specs = tuple(dict.fromkeys([*base_specs, *effects]))
+    built, requested = build_model(name, specs)
+    return ModelChoice(built, requested, specs, parameter_file, parameter_path)
+
+
+def model_choice(args: argparse.Namespace, defaults: ModelDefaults = COSSERAT) -> ModelChoice:
+    """`choose_model` on the options of `commands.common.add_model_arguments`."""
+    return choose_model(args.model, args.effect, getattr(args, "params", None), defaults)
+
+
+def _file_effect_specs(parameter_file: ParameterFile, path: Path, effect_files: Sequence[str]) -> list[str]:
+    named_files = {load_effect(spec).name: spec for spec in effect_files}
+    specs = [named_files.get(name, name) for name in parameter_file.effects]
+    for spec in specs:
+        if spec not in LIBRARY and ":" not in spec:
+            raise UserError(f"{path}: effect {spec!r} is not in the library ({', '.join(sorted(LIBRARY))}); "
+                            "if it comes from a file, give that file with --effect path/to/file.py:ClassName")
+    return specs
