@@ -30,10 +30,10 @@ def schema_name(record_type: type[LogRecord]) -> str:
 
 @cache
 def topic_schema(record_type: type[LogRecord]) -> JsonSchema:
-    """The self-contained JSON schema of ``record_type``'s messages."""
+    """The self-contained JSON schema of ``record_type``'s messages, as plain JSON values."""
     generated = msgspec.json.schema(record_type)
     schema = _viewer_form(generated, generated.get("$defs", {}))
-    return {**schema, "title": schema_name(record_type)}
+    return msgspec.json.decode(msgspec.json.encode({**schema, "title": schema_name(record_type)}))  # () -> []
 
 
 def _viewer_form(node: JsonSchema, defs: dict[str, JsonSchema]) -> JsonSchema:
