@@ -18,6 +18,7 @@ from log_examples import EXAMPLES, small_log
 from mcap.reader import make_reader
 from record_strategies import records_of
 
+from hydrojet_bench.bench.replay import read_session
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.logs import TOPICS, LogError, read_log
 from hydrojet_bench.logs.codec import decode, encode
@@ -168,3 +169,10 @@ def test_logs_of_format_1_still_read(tmp_path: Path) -> None:
     steps = [record for record in old.messages if isinstance(record, Step)]
     assert steps[0].time_s is None and steps[0].base_orientation is None  # optional then, None now
     assert old.on(Event)[0].level == "warning" and old.on(ImuRaw)[0].mag_ut is None
+
+
+def test_replay_names_what_a_format_1_step_lacks() -> None:
+    # Steps of the earliest logs carry no averaged sensor poses: nothing to replay.
+    with pytest.raises(UserError, match=r"/bench/step messages are not complete settled steps "
+                                        r"\(/bench/step.time_s is missing\)"):
+        read_session(FORMAT_1_LOG, "sim")
