@@ -33,8 +33,9 @@ def _numpy_as_json(value: Any) -> Any:
 
 
 _ENCODER = msgspec.json.Encoder(enc_hook=_numpy_as_json)
-# Lax: JSON Schema counts 3.0 as an integer, and the checker that guarded logs of earlier
-# versions did too, so such a log may hold 3.0 in an integer field.
+# Lax (strict=False): JSON Schema counts 3.0 as an integer, and so did the checker that
+# guarded logs of earlier versions, so such a log may hold 3.0 in an integer field. Lax
+# also reads numbers and booleans written as strings, which no bench writer produces.
 _DECODERS = {topic: msgspec.json.Decoder(record_type, strict=False) for topic, record_type in TOPICS.items()}
 _AT = re.compile(r"^(?P<what>.*) - at `\$(?P<where>[^`]*)`$", re.DOTALL)
 

@@ -31,8 +31,12 @@ class LogRecord(msgspec.Struct, frozen=True, kw_only=True):
 
 @overload
 def floats(values: None) -> None: ...
+
+
 @overload
 def floats(values: ArrayLike) -> tuple[float, ...]: ...
+
+
 def floats(values: ArrayLike | None) -> tuple[float, ...] | None:
     """``values`` (a numpy array, a sequence of numbers) as a record's tuple of floats;
     None stays None (a field that is not measured)."""

@@ -16,6 +16,7 @@ from log_examples import EXAMPLES, METADATA, QUATERNION, START_TIME_UNIX_S, smal
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
+from hydrojet_bench.cli import main
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.logs import TOPICS, LogError, LogWriter, read_log, read_metadata
 from hydrojet_bench.logs.schemas import schema_name, topic_schema
@@ -159,7 +160,7 @@ def test_log_is_finished_when_the_session_fails(tmp_path: Path) -> None:
 
 # --- messages a reader refuses -------------------------------------------------------
 
-def test_a_malformed_message_is_a_log_error_naming_file_topic_and_field(tmp_path: Path) -> None:
+def test_a_malformed_message_is_a_log_error_naming_file_topic_and_field(tmp_path: Path, capsys) -> None:
     """As another program (or a bug) could write it: a whole message, in a valid chunk,
     that its topic's record type cannot read."""
     path = tmp_path / "odd.mcap"
@@ -177,6 +178,9 @@ def test_a_malformed_message_is_a_log_error_naming_file_topic_and_field(tmp_path
                                        r"`array` of length >= 3"):
         read_log(path)
     assert read_log(path, topics=["/events"]).messages == []  # other topics, and unknown ones, are not read
+    assert main(["sensors", str(path)]) == 2  # a user's problem: one line, no traceback
+    error = " ".join(capsys.readouterr().err.split())  # the CLI's console wraps long lines
+    assert "odd.mcap, message at t_s=0.5 s: /bench/sample.jet_forces_n: Expected" in error and "Traceback" not in error
 
 
 def test_records_are_read_by_type(tmp_path: Path) -> None:
