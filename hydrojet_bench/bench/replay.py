@@ -23,13 +23,14 @@ from ..estimation.online import OnlineSettings
 from ..estimation.path import PathPredictor, StepPrediction
 from ..logs import read_log
 from ..logs.dataset import rig_profile_of_log
+from ..logs.topics import ModelPrediction, Parameters, Step
 from ..models.shooting import ShootingModel
 from ..params import ModelParameters, with_parameters
 from ..profile import RigProfile
 
-STEP_TOPIC = "/bench/step"
-PARAMETERS_TOPIC = "/bench/parameters"
-PREDICTION_TOPIC = "/model/prediction"
+STEP_TOPIC = Step.topic
+PARAMETERS_TOPIC = Parameters.topic
+PREDICTION_TOPIC = ModelPrediction.topic
 
 
 class NoSettledSteps(UserError):
@@ -65,32 +66,33 @@ def read_session(path: Path, profile: RigProfile | str | Path | None = None) -> 
     """The settled steps, parameter timeline and live predictions of a session log."""
     contents = read_log(path, topics=[STEP_TOPIC, PARAMETERS_TOPIC, PREDICTION_TOPIC])
     rig = rig_profile_of_log(path, profile, contents.metadata)
-    records = contents.on(STEP_TOPIC)
+    records = contents.on(Step)
     if not records:
         raise NoSettledSteps(f"{path}: no settled steps ({STEP_TOPIC}) in this log; "
                              "was it written by `hydrojet-bench run`?")
-    data = [record.data for record in records]
-    with_positions = all(row.get("base_position_m") is not None for row in data)
+    with_positions = all(row.base_position_m is not None for row in records)
 
     def column(key: str) -> np.ndarray:
-        return np.array([row[key] for row in data], dtype=float)
+        values = [getattr(row, key) for row in records]
+        if any(value is None for value in values):
+            raise ValueError(f"{STEP_TOPIC}.{key} is missing")
+        return np.array(values, dtype=float)
 
     try:
         steps = Dataset(time_s=column("time_s"), jet_forces_n=column("jet_forces_n"),
                         base_orientation=column("base_orientation"), tip_orientation=column("tip_orientation"),
                         base_position_m=column("base_position_m") if with_positions else None,
                         tip_position_m=column("tip_position_m") if with_positions else None,
-                        sweep=np.array([row["sweep"] for row in data]), step=np.array([row["step"] for row in data]),
+                        sweep=np.array([row.sweep for row in records]), step=np.array([row.step for row in records]),
                         profile=rig, source=str(path))
-    except (KeyError, ValueError) as error:
+    except ValueError as error:
         raise UserError(f"{path}: {STEP_TOPIC} messages are not complete settled steps ({error})") from None
     bench = contents.metadata.get("bench", {})
-    parameters = tuple(ParameterRecord(message.t_s, dict(message.data["parameters"]), bool(message.data["calibrated"]))
-                       for message in contents.on(PARAMETERS_TOPIC))
-    live = {(int(m.data["index"]), str(m.data.get("method", "ref"))): float(m.data["orientation_error_deg"])
-            for m in contents.on(PREDICTION_TOPIC)}
+    parameters = tuple(ParameterRecord(message.t_s, dict(message.parameters), message.calibrated)
+                       for message in contents.on(Parameters))
+    live = {(m.index, m.method): m.orientation_error_deg for m in contents.on(ModelPrediction)}
     return LoggedSession(Path(path), rig, bench.get("model", "cosserat"), tuple(json.loads(bench.get("effects", "[]"))),
-                         steps, np.array([row["index"] for row in data]), np.array([r.t_s for r in records]),
+                         steps, np.array([row.index for row in records]), np.array([r.t_s for r in records]),
                          parameters, live, contents.truncated)
 
 

@@ -40,7 +40,9 @@ from ..data.dataset import Dataset
 from ..errors import ConvergenceError, UserError
 from ..estimation.calibration import CalibrationResult, calibrate_dataset
 from ..estimation.path import PathPredictor, StepPrediction
-from ..logs import LogWriter
+from ..logs import LogWriter, floats
+from ..logs.topics import (Disturbance, EmFrame, EmTool, Event, ImuOrientation, ImuRaw, ModelPrediction,
+                           Parameters, Sample, Step, ValveCommand, ValveReply)
 from ..models.shooting import ShootingModel
 from ..effects import effect_values
 from ..geometry import quat_from_matrix
@@ -198,7 +200,7 @@ class Session:
         t_s = self.clock.now()
         self.status.events.append((t_s, level, message))
         if self._log is not None:
-            self._log.write("/events", {"t_s": t_s, "level": level, "source": source, "message": message}, t_s=t_s)
+            self._log.write(Event(t_s=t_s, level=level, source=source, message=message))
 
     # --- devices --------------------------------------------------------------------
 
@@ -258,13 +260,13 @@ class Session:
                 continue
             t_s = self.clock.now()
             status.em_frames += 1
-            tools = [{
-                "name": pose.name, "handle": pose.handle, "status": pose.status.value,
-                "orientation": pose.orientation, "position_m": None if pose.position_mm is None
-                else [v / 1000.0 for v in pose.position_mm], "rms_error_mm": pose.rms_error_mm,
-            } for pose in frame.poses]
-            log.write("/em/frame", {"t_s": t_s, "frame_number": frame.frame_number,
-                                    "system_status": f"{frame.system_status:#06x}", "tools": tools}, t_s=t_s)
+            tools = tuple(EmTool(
+                name=pose.name, handle=pose.handle, status=pose.status.value, orientation=pose.orientation,
+                position_m=None if pose.position_mm is None else tuple(v / 1000.0 for v in pose.position_mm),
+                rms_error_mm=pose.rms_error_mm,
+            ) for pose in frame.poses)
+            log.write(EmFrame(t_s=t_s, frame_number=frame.frame_number,
+                              system_status=f"{frame.system_status:#06x}", tools=tools))
             try:
                 base, tip = frame["base"], frame["tip"]
             except KeyError:
@@ -302,27 +304,26 @@ class Session:
                 continue
             self.status.imu_samples += 1
             for name, chip, sample in (("base", base_chip, base), ("tip", tip_chip, tip)):
-                log.write("/imu/raw", {"t_s": sample.t_s, "sensor": name, "address": chip.address,
-                                       "accel_m_s2": sample.accel_m_s2, "gyro_rad_s": sample.gyro_rad_s,
-                                       "mag_ut": sample.mag_ut, "temperature_c": sample.temperature_degc},
-                          t_s=sample.t_s)
+                log.write(ImuRaw(t_s=sample.t_s, sensor=name, address=chip.address,
+                                 accel_m_s2=floats(sample.accel_m_s2), gyro_rad_s=floats(sample.gyro_rad_s),
+                                 mag_ut=floats(sample.mag_ut), temperature_c=sample.temperature_degc))
             tip_in_base = fusion.update(base, tip)
             t_s = tip.t_s
             base_q, tip_q = fusion.base.quaternion, fusion.tip.quaternion
-            log.write("/imu/orientation", {"t_s": t_s, "base": base_q, "tip": tip_q, "tip_in_base": tip_in_base},
-                      t_s=t_s)
+            log.write(ImuOrientation(t_s=t_s, base=floats(base_q), tip=floats(tip_q),
+                                     tip_in_base=floats(tip_in_base)))
             self.imu.add(t_s, base_q, tip_q)
             self._write_sample("imu", t_s, base_q, tip_q, None, None)
 
     def _write_sample(self, source: str, t_s: float, base_q, tip_q, base_p, tip_p) -> None:
         step = self.em.step
-        self._log.write("/bench/sample", {
-            "t_s": t_s, "source": source,
-            "jet_forces_n": step.jet_forces_n if step is not None else (0.0, 0.0, 0.0),
-            "sweep": step.sweep if step is not None else CALIBRATION_SWEEP,
-            "step": step.step if step is not None else 0,
-            "base_orientation": base_q, "tip_orientation": tip_q,
-            "base_position_m": base_p, "tip_position_m": tip_p}, t_s=t_s)
+        self._log.write(Sample(
+            t_s=t_s, source=source,
+            jet_forces_n=floats(step.jet_forces_n if step is not None else (0.0, 0.0, 0.0)),
+            sweep=step.sweep if step is not None else CALIBRATION_SWEEP,
+            step=step.step if step is not None else 0,
+            base_orientation=floats(base_q), tip_orientation=floats(tip_q),
+            base_position_m=floats(base_p), tip_position_m=floats(tip_p)))
 
     # --- the plan -------------------------------------------------------------------
 
@@ -357,20 +358,19 @@ class Session:
 
     async def _command(self, valves: ValveController, forces) -> None:
         t_s = self.clock.now()
-        self._log.write("/valves/command", {"t_s": t_s, "command": "SET_ALL", "duties_permille": None,
-                                            "jet_forces_n": forces}, t_s=t_s)
+        self._log.write(ValveCommand(t_s=t_s, command="SET_ALL", duties_permille=None, jet_forces_n=floats(forces)))
         try:
             duties = await valves.set_forces_n(forces)
         except ValveError as error:
             t_s = self.clock.now()
-            self._log.write("/valves/reply", {"t_s": t_s, "command": "SET_ALL", "ok": False,
-                                              "code": type(error).__name__, "detail": str(error)}, t_s=t_s)
+            self._log.write(ValveReply(t_s=t_s, command="SET_ALL", ok=False, code=type(error).__name__,
+                                       detail=str(error)))
             raise SessionAborted(f"valve controller refused or did not answer: {error}") from error
         t_s = self.clock.now()
         self.status.valve_commands += 1
         self.status.valve_retries = valves.timeouts
-        self._log.write("/valves/reply", {"t_s": t_s, "command": "SET_ALL", "ok": True, "code": None,
-                                          "detail": f"duties {list(duties)} per mille"}, t_s=t_s)
+        self._log.write(ValveReply(t_s=t_s, command="SET_ALL", ok=True, code=None,
+                                   detail=f"duties {list(duties)} per mille"))
 
     async def _settle(self, index: int, step: PlanStep, end_s: float, window_s: float) -> None:
         settled = self.em.settled(end_s, window_s)
@@ -379,16 +379,17 @@ class Session:
             return
         self.settled_rows.append(settled)
         positions = settled.tip_position_in_base_m()
-        self._log.write("/bench/step", {
-            "t_s": end_s, "index": index, "count": len(self.request.plan), "sweep": step.sweep, "step": step.step,
-            "jet_forces_n": settled.jet_forces_n[0], "samples": self.em.sample_count,
-            "tip_in_base_measured": settled.tip_orientation_in_base()[0],
-            "tip_position_in_base_m": None if positions is None else positions[0],
-            "time_s": float(settled.time_s[0]),
-            "base_orientation": settled.base_orientation[0], "tip_orientation": settled.tip_orientation[0],
-            "base_position_m": None if positions is None else settled.base_position_m[0],
-            "tip_position_m": None if positions is None else settled.tip_position_m[0],
-        }, t_s=end_s)
+        self._log.write(Step(
+            t_s=end_s, index=index, count=len(self.request.plan), sweep=step.sweep, step=step.step,
+            jet_forces_n=floats(settled.jet_forces_n[0]), samples=self.em.sample_count,
+            tip_in_base_measured=floats(settled.tip_orientation_in_base()[0]),
+            tip_position_in_base_m=None if positions is None else floats(positions[0]),
+            time_s=float(settled.time_s[0]),
+            base_orientation=floats(settled.base_orientation[0]),
+            tip_orientation=floats(settled.tip_orientation[0]),
+            base_position_m=None if positions is None else floats(settled.base_position_m[0]),
+            tip_position_m=None if positions is None else floats(settled.tip_position_m[0]),
+        ))
         if step.sweep == CALIBRATION_SWEEP and self.request.calibrate:
             self._calibration_rows.append(settled)
         await self._estimate(index, settled, end_s)
@@ -408,20 +409,21 @@ class Session:
         for prediction in (estimate.ref, estimate.online):
             if prediction is None:
                 continue
-            log.write("/model/prediction", {
-                "t_s": t_s, "index": index, "method": prediction.method, "tip_in_base": prediction.tip_orientation_in_base,
-                "tip_position_in_base_m": prediction.tip_position_in_base_m, "bend_deg": prediction.bend_deg,
-                "orientation_error_deg": prediction.orientation_error_deg,
-                "position_error_mm": prediction.position_error_mm}, t_s=t_s)
+            log.write(ModelPrediction(
+                t_s=t_s, index=index, method=prediction.method,
+                tip_in_base=floats(prediction.tip_orientation_in_base),
+                tip_position_in_base_m=floats(prediction.tip_position_in_base_m), bend_deg=prediction.bend_deg,
+                orientation_error_deg=prediction.orientation_error_deg,
+                position_error_mm=prediction.position_error_mm))
         best = estimate.best
         if estimate.online is not None:
             moment = estimate.online.disturbance_moment_nm
-            log.write("/estimate/disturbance", {
-                "t_s": t_s, "index": index, "force_n": estimate.disturbance_force_n, "moment_nm": moment,
-                "moment_norm_nm": float(np.linalg.norm(moment)),
-                "orientation_error_deg_before": estimate.error_before_deg,
-                "orientation_error_deg_after": estimate.online.orientation_error_deg,
-                "iterations": estimate.iterations}, t_s=t_s)
+            log.write(Disturbance(
+                t_s=t_s, index=index, force_n=floats(estimate.disturbance_force_n), moment_nm=floats(moment),
+                moment_norm_nm=float(np.linalg.norm(moment)),
+                orientation_error_deg_before=estimate.error_before_deg,
+                orientation_error_deg_after=estimate.online.orientation_error_deg,
+                iterations=estimate.iterations))
             self.status.disturbance_norm_nm = float(np.linalg.norm(moment))
             self.status.online_error_deg = estimate.online.orientation_error_deg
         self.status.ref_error_deg = estimate.ref.orientation_error_deg
@@ -464,10 +466,10 @@ class Session:
         # rebuilds exactly the parameters the live estimator used.
         values.update({f"{effect.name}.{name}": value for effect in self.request.model.effects
                        for name, value in effect_values(effect, self.params).items()})
-        self._log.write("/bench/parameters", {
-            "t_s": t_s, "model": self.request.model.name, "effects": list(self.request.effects),
-            "parameters": values,
-            "calibrated": calibration is not None,
-            "rms_orientation_deg_before": None if calibration is None else calibration.rms_orientation_deg_before,
-            "rms_orientation_deg_after": None if calibration is None else calibration.rms_orientation_deg_after,
-        }, t_s=t_s)
+        self._log.write(Parameters(
+            t_s=t_s, model=self.request.model.name, effects=tuple(self.request.effects),
+            parameters=values,
+            calibrated=calibration is not None,
+            rms_orientation_deg_before=None if calibration is None else calibration.rms_orientation_deg_before,
+            rms_orientation_deg_after=None if calibration is None else calibration.rms_orientation_deg_after,
+        ))

@@ -27,6 +27,7 @@ from ..estimation import OnlineSettings
 from ..estimation.calibration import calibrate_dataset
 from ..logs import read_log
 from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log
+from ..logs.topics import Sample
 from ..model_choice import ModelDefaults, model_choice
 from . import render
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
@@ -81,7 +82,7 @@ def load_sources(log: Path, profile: str | None) -> tuple[Dataset, Dataset, dict
     """The log's EM samples, its IMU samples (with the IMU earth frame's gravity) and its
     metadata. A log without IMU samples is a `UserError` that says so."""
     contents = read_log(log, topics=[SAMPLE_TOPIC])
-    sources = {message.data.get("source") for message in contents.messages}
+    sources = {sample.source for sample in contents.on(Sample)}
     for source, what in (("imu", "IMU"), ("em", "EM tracker")):
         if source not in sources:
             raise UserError(f"{log}: no {what} samples ({SAMPLE_TOPIC} with source {source!r}); `sensors` needs a "

@@ -1,6 +1,6 @@
 """`dataset_from_log`: a session log's samples as the `Dataset` the analysis commands use.
 
-Each ``/bench/sample`` message is one row of the CSV contract
+Each ``/bench/sample`` message (a `Sample` record) is one row of the CSV contract
 (`hydrojet_bench.data.csv_io`), with the same meaning; rows are taken in file order.
 The rig profile is the one given, else the one the bench embedded in the log's metadata
 (``bench.profile_toml``, the profile file's text, and ``bench.profile_name``).
@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import tomllib
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -18,10 +17,9 @@ from ..data.dataset import Dataset, SampleFlag, saturation_flags
 from ..errors import UserError
 from ..profile import RigProfile, load_profile, profile_from_mapping
 from .reader import read_log
-from .schemas import TOPICS, schema_problem
+from .topics import Sample
 
-SAMPLE_TOPIC = "/bench/sample"
-_SAMPLE_SCHEMA = TOPICS[SAMPLE_TOPIC][1]
+SAMPLE_TOPIC = Sample.topic
 
 
 def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None = None,
@@ -31,35 +29,31 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
     profile: a `RigProfile`, a TOML path or a shipped profile's name; None uses the
         profile embedded in the log.
     A truncated log gives the samples before the cut. Raises `UserError` naming the file
-    if there are no samples of that source, a sample breaks the schema or the CSV
+    if there are no samples of that source, a sample is malformed or breaks the CSV
     contract, or no profile is to be had.
     """
     path = Path(path)
     contents = read_log(path, topics=[SAMPLE_TOPIC])
-    rows = [message for message in contents.messages if message.data.get("source") == source]
+    samples = contents.on(Sample)
+    rows = [sample for sample in samples if sample.source == source]
     if not rows:
-        sources = sorted({str(message.data.get("source")) for message in contents.messages})
+        sources = sorted({sample.source for sample in samples})
         found = f"it has samples from {', '.join(sources)} only" if sources else f"it has no {SAMPLE_TOPIC} messages"
         cut = " (the log is truncated)" if contents.truncated else ""
         raise UserError(f"{path}: no {SAMPLE_TOPIC} samples from source {source!r}: {found}{cut}")
-    for message in rows:
-        problem = schema_problem(_SAMPLE_SCHEMA, message.data, SAMPLE_TOPIC)
-        if problem:
-            raise UserError(f"{path}, message at t_s={message.t_s!r} s: {problem}")
     rig = rig_profile_of_log(path, profile, contents.metadata)
-    data = [message.data for message in rows]
 
     def column(key: str) -> np.ndarray:
-        return np.array([row[key] for row in data], dtype=float)
+        return np.array([getattr(row, key) for row in rows], dtype=float)
 
     forces = column("jet_forces_n")
     negative = np.flatnonzero(np.any(forces < 0.0, axis=1))
     if len(negative):
         i = int(negative[0])
         raise UserError(f"{path}, message at t_s={rows[i].t_s!r} s: {SAMPLE_TOPIC}.jet_forces_n: jet forces must "
-                        f"be >= 0 N (a jet cannot pull), got {data[i]['jet_forces_n']}")
+                        f"be >= 0 N (a jet cannot pull), got {list(rows[i].jet_forces_n)}")
     # SATURATED comes from the profile, as for CSV; the other flags are the bench's.
-    logged_flags = np.array([row.get("flags", 0) for row in data], dtype=np.int64) & ~int(SampleFlag.SATURATED)
+    logged_flags = np.array([row.flags for row in rows], dtype=np.int64) & ~int(SampleFlag.SATURATED)
     try:
         return Dataset(
             time_s=column("t_s"), jet_forces_n=forces,
@@ -74,9 +68,9 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
         raise UserError(f"{path}: {SAMPLE_TOPIC} ({source}): {error}") from None
 
 
-def _positions(path: Path, rows: list[Any], key: str) -> np.ndarray | None:
+def _positions(path: Path, rows: list[Sample], key: str) -> np.ndarray | None:
     """A sensor's positions: all rows have them, or none (None), as for a CSV column."""
-    missing = [row.data[key] is None for row in rows]
+    missing = [getattr(row, key) is None for row in rows]
     if all(missing):
         return None
     if any(missing):
@@ -84,7 +78,7 @@ def _positions(path: Path, rows: list[Any], key: str) -> np.ndarray | None:
         raise UserError(f"{path}, message at t_s={rows[i].t_s!r} s: {SAMPLE_TOPIC}.{key} is "
                         f"{'null' if missing[i] else 'given'} but was {'given' if missing[i] else 'null'} in the "
                         "samples before; a source measures a sensor's position in every sample or in none")
-    return np.array([row.data[key] for row in rows], dtype=float)
+    return np.array([getattr(row, key) for row in rows], dtype=float)
 
 
 def rig_profile_of_log(path: Path, profile: RigProfile | str | Path | None,

@@ -2,34 +2,29 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TypeVar
 
 from mcap.records import Channel, Message, Metadata
 
+from .codec import LogError, decode
+from .format import LOG_METADATA_NAME, MESSAGE_ENCODING, START_TIME_KEY
+from .log_record import LogRecord
 from .records import RecordScanner
-from .schemas import LOG_METADATA_NAME, MESSAGE_ENCODING, START_TIME_KEY, TOPICS
+from .topics import TOPICS
 
 _NS_PER_S = 10**9  # an int: int / int divides with correct rounding
-
-
-@dataclass(frozen=True)
-class LogMessage:
-    """One message: its topic, session time ``t_s`` in s, and its decoded JSON fields."""
-
-    topic: str
-    t_s: float
-    data: dict[str, Any]
+Record = TypeVar("Record", bound=LogRecord)
 
 
 @dataclass(frozen=True)
 class LogContents:
     """What a log holds.
 
-    messages: in file order (the order they were written).
+    messages: the records, in file order (the order they were written); a record's
+        ``topic`` names its topic, its ``t_s`` is its session time, s.
     metadata: the writer's named metadata records, e.g. ``metadata["bench"]["profile_name"]``.
     truncated: True unless the file ended properly (footer and closing magic), i.e. the
         writer was killed or the file was cut or damaged; everything whole before the
@@ -38,14 +33,14 @@ class LogContents:
         file does not say).
     """
 
-    messages: list[LogMessage]
+    messages: list[LogRecord]
     metadata: dict[str, dict[str, str]]
     truncated: bool
     start_time_unix_s: float | None = None
 
-    def on(self, topic: str) -> list[LogMessage]:
-        """The messages of one topic, in file order."""
-        return [message for message in self.messages if message.topic == topic]
+    def on(self, record_type: type[Record]) -> list[Record]:
+        """The messages of one topic, given by its record type, in file order."""
+        return [message for message in self.messages if type(message) is record_type]
 
 
 def start_time_ns(metadata: dict[str, str]) -> int | None:
@@ -58,8 +53,10 @@ def start_time_ns(metadata: dict[str, str]) -> int | None:
 
 def read_log(path: str | Path, topics: Iterable[str] | None = None) -> LogContents:
     """Every whole message of a session log (of ``topics`` only, if given), complete or
-    truncated. Raises `UserError` for a file that is not MCAP, ValueError for a topic not
-    in `TOPICS`. Channels that are not JSON (another program's MCAP) are skipped."""
+    truncated, as records. Raises `UserError` for a file that is not MCAP, `LogError`
+    naming the file, topic and field for a message its record type cannot read, and
+    ValueError for a topic not in `TOPICS`. Channels of other topics or not in JSON
+    (another program's MCAP) are skipped."""
     wanted = None if topics is None else set(topics)
     unknown = sorted((wanted or set()) - TOPICS.keys())
     if unknown:
@@ -69,8 +66,7 @@ def read_log(path: str | Path, topics: Iterable[str] | None = None) -> LogConten
     metadata: dict[str, dict[str, str]] = {}
     start_ns: int | None = None
     first_log_time: int | None = None
-    messages: list[LogMessage] = []
-    damaged = False
+    messages: list[LogRecord] = []
     for record in scanner:
         if isinstance(record, Metadata):
             if record.name == LOG_METADATA_NAME:
@@ -78,7 +74,8 @@ def read_log(path: str | Path, topics: Iterable[str] | None = None) -> LogConten
             else:
                 metadata[record.name] = dict(record.metadata)
         elif isinstance(record, Channel):
-            keep = record.message_encoding == MESSAGE_ENCODING and (wanted is None or record.topic in wanted)
+            keep = (record.message_encoding == MESSAGE_ENCODING and record.topic in TOPICS
+                    and (wanted is None or record.topic in wanted))
             channels.setdefault(record.id, record.topic if keep else None)
         elif isinstance(record, Message):
             first_log_time = record.log_time if first_log_time is None else first_log_time
@@ -86,17 +83,11 @@ def read_log(path: str | Path, topics: Iterable[str] | None = None) -> LogConten
             if topic is None:
                 continue
             try:
-                data = json.loads(record.data)
-            except ValueError:
-                data = None
-            if not isinstance(data, dict):
-                damaged = True  # a whole record with a broken payload: the readable part ends here
-                break
-            t_s = data.get("t_s")
-            if isinstance(t_s, bool) or not isinstance(t_s, (int, float)):
-                t_s = (record.log_time - (first_log_time if start_ns is None else start_ns)) / _NS_PER_S
-            messages.append(LogMessage(topic, float(t_s), data))
-    return LogContents(messages=messages, metadata=metadata, truncated=damaged or not scanner.complete,
+                messages.append(decode(topic, record.data))
+            except LogError as error:
+                log_time_s = (record.log_time - (first_log_time if start_ns is None else start_ns)) / _NS_PER_S
+                raise LogError(f"{path}, message at t_s={log_time_s!r} s: {error}") from None
+    return LogContents(messages=messages, metadata=metadata, truncated=not scanner.complete,
                        start_time_unix_s=None if start_ns is None else start_ns / _NS_PER_S)
 
 

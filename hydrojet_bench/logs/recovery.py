@@ -18,7 +18,7 @@ from mcap.writer import CompressionType, Writer
 from ..errors import UserError
 from .reader import start_time_ns
 from .records import RecordScanner
-from .schemas import LOG_METADATA_NAME
+from .format import LOG_METADATA_NAME
 from .writer import LIBRARY
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+import msgspec
 import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 from numpy.typing import ArrayLike
@@ -26,15 +27,20 @@ from numpy.typing import ArrayLike
 from .. import __version__
 from ..errors import UserError
 from ..params import RodParameters
-from .codec import encode, jsonable
-from .schemas import (FORMAT_VERSION, LINE_STRIP, LOG_METADATA_NAME, MESSAGE_ENCODING, SCHEMA_ENCODING,
-                      START_TIME_KEY, TOPICS, schema_problem)
+from .codec import LogError, decode, encode
+from .format import FORMAT_VERSION, LOG_METADATA_NAME, MESSAGE_ENCODING, SCHEMA_ENCODING, START_TIME_KEY
+from .foxglove import (LINE_STRIP, Color, Duration, FrameTransform, LinePrimitive, Point3, Pose, Quaternion,
+                       SceneEntity, SceneUpdate, Time, Vector3)
+from .log_record import LogRecord
+from .schemas import schema_name, topic_schema
+from .topics import TOPICS
 
 LIBRARY = f"hydrojet-bench {__version__}; {LIBRARY_IDENTIFIER}"
 _NS_PER_S = 1_000_000_000
 # The HydroJet sleeve's diameter: drawn at true width, the backbone looks like the rod.
 DEFAULT_BACKBONE_THICKNESS_M = 2 * RodParameters().radius_m
 DEFAULT_BACKBONE_COLOR = (0.95, 0.55, 0.1, 1.0)
+_IDENTITY_POSE = Pose(position=Vector3(0.0, 0.0, 0.0), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
 
 
 class LogWriter:
@@ -48,8 +54,8 @@ class LogWriter:
         (default: now). Message times in the file are this plus ``t_s``, in ns.
     flush_interval_s: wall time between automatic flushes, s.
 
-    `write` raises ValueError for an unknown topic or a message that breaks its topic's
-    schema (`hydrojet_bench.logs.schemas`), naming the field.
+    `write` raises ValueError for a record that is not of a topic's type or that its
+    topic's reader would refuse (e.g. NaN where null is not allowed), naming the field.
     """
 
     def __init__(self, path: str | Path, metadata: Mapping[str, Mapping[str, str]] | None = None,
@@ -82,23 +88,19 @@ class LogWriter:
 
     # --- writing ------------------------------------------------------------------------
 
-    def write(self, topic: str, message: Mapping[str, Any], t_s: float) -> None:
-        """Log one message on a topic of `TOPICS` at session time ``t_s`` (s). ``message``
-        may hold numpy arrays and scalars; ``t_s`` is added to it (if it already has a
-        ``t_s``, the two must agree)."""
-        if topic not in TOPICS:
-            raise ValueError(f"unknown log topic {topic!r}; topics: {', '.join(TOPICS)}")
-        if not isinstance(message, Mapping):
-            raise ValueError(f"{topic}: a message is a mapping of fields, got {type(message).__name__}")
-        log_time = self._log_time(topic, t_s)
-        body = jsonable(message, topic)
-        if "t_s" in body and body["t_s"] != float(t_s):
-            raise ValueError(f"{topic}.t_s: the message says {body['t_s']!r} s but was written at t_s={t_s!r} s")
-        body = {"t_s": float(t_s), **body}
-        problem = schema_problem(TOPICS[topic][1], body, topic)
-        if problem:
-            raise ValueError(problem)
-        self._add(topic, log_time, encode(body))
+    def write(self, record: LogRecord) -> None:
+        """Log one record (a type of `TOPICS`) on its topic at its session time ``t_s``."""
+        topic = getattr(record, "topic", None)
+        if TOPICS.get(topic) is not type(record):
+            raise ValueError(f"not a log record: {type(record).__name__}; records: "
+                             f"{', '.join(record_type.__name__ for record_type in TOPICS.values())}")
+        log_time = self._log_time(topic, record.t_s)
+        try:
+            data = encode(record)
+            decode(topic, data)  # what the reader would refuse is a bug here, not a log to find out later
+        except (LogError, TypeError, msgspec.EncodeError) as error:
+            raise ValueError(str(error) if isinstance(error, LogError) else f"{topic}: {error}") from None
+        self._add(topic, log_time, data)
 
     def write_transform(self, t_s: float, parent: str, child: str, rotation: ArrayLike,
                         translation_m: ArrayLike) -> None:
@@ -107,11 +109,10 @@ class LogWriter:
         child-frame vectors into the parent frame, ``translation_m`` the child origin in
         the parent frame, m."""
         w, x, y, z = _finite("/tf rotation", rotation, (4,))
-        tx, ty, tz = _finite("/tf translation_m", translation_m, (3,))
-        self.write("/tf", {
-            "timestamp": self._timestamp("/tf", t_s), "parent_frame_id": parent, "child_frame_id": child,
-            "translation": {"x": tx, "y": ty, "z": tz}, "rotation": {"x": x, "y": y, "z": z, "w": w},
-        }, t_s)
+        self.write(FrameTransform(t_s=t_s, timestamp=self._timestamp(FrameTransform.topic, t_s),
+                                  parent_frame_id=parent, child_frame_id=child,
+                                  translation=Vector3(*_finite("/tf translation_m", translation_m, (3,))),
+                                  rotation=Quaternion(x=x, y=y, z=z, w=w)))
 
     def write_backbone(self, t_s: float, positions_in_base_m: ArrayLike, frame: str = "base", *,
                        thickness_m: float = DEFAULT_BACKBONE_THICKNESS_M,
@@ -120,20 +121,12 @@ class LogWriter:
         (foxglove.SceneUpdate): one entity ``"backbone"`` holding one LINE_STRIP drawn
         ``thickness_m`` wide, replacing the previous one."""
         points = _finite("/scene/backbone positions_in_base_m", positions_in_base_m, (None, 3))
-        stamp = self._timestamp("/scene/backbone", t_s)
-        r, g, b, a = color
-        line = {
-            "type": LINE_STRIP,
-            "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0},
-                     "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
-            "thickness": thickness_m, "scale_invariant": False,
-            "points": [{"x": px, "y": py, "z": pz} for px, py, pz in points],
-            "color": {"r": r, "g": g, "b": b, "a": a}, "colors": [], "indices": [],
-        }
-        entity = {"timestamp": stamp, "frame_id": frame, "id": "backbone", "lifetime": {"sec": 0, "nsec": 0},
-                  "frame_locked": True, "metadata": [], "arrows": [], "cubes": [], "spheres": [],
-                  "cylinders": [], "lines": [line], "triangles": [], "texts": [], "models": []}
-        self.write("/scene/backbone", {"deletions": [], "entities": [entity]}, t_s)
+        line = LinePrimitive(type=LINE_STRIP, pose=_IDENTITY_POSE, thickness=thickness_m, scale_invariant=False,
+                             points=tuple(Point3(*point) for point in points), color=Color(*color),
+                             colors=(), indices=())
+        entity = SceneEntity(timestamp=self._timestamp(SceneUpdate.topic, t_s), frame_id=frame, id="backbone",
+                             lifetime=Duration(0, 0), frame_locked=True, lines=(line,))
+        self.write(SceneUpdate(t_s=t_s, entities=(entity,)))
 
     def flush(self) -> None:
         """Close the open chunk and hand everything written so far to the operating system."""
@@ -173,16 +166,16 @@ class LogWriter:
             raise ValueError(f"{topic}: t_s={t_s!r} s falls before the Unix epoch")
         return log_time
 
-    def _timestamp(self, topic: str, t_s: float) -> dict[str, int]:
-        sec, nsec = divmod(self._log_time(topic, t_s), _NS_PER_S)
-        return {"sec": sec, "nsec": nsec}
+    def _timestamp(self, topic: str, t_s: float) -> Time:
+        return Time(*divmod(self._log_time(topic, t_s), _NS_PER_S))
 
     def _add(self, topic: str, log_time: int, data: bytes) -> None:
         self._check_open()
         channel = self._channels.get(topic)
         if channel is None:
-            schema_name, schema = TOPICS[topic]
-            schema_id = self._writer.register_schema(schema_name, SCHEMA_ENCODING, encode(schema))
+            record_type = TOPICS[topic]
+            schema_id = self._writer.register_schema(schema_name(record_type), SCHEMA_ENCODING,
+                                                     msgspec.json.encode(topic_schema(record_type)))
             channel = self._channels[topic] = self._writer.register_channel(topic, MESSAGE_ENCODING, schema_id)
             self._sequence[channel] = 0
         sequence = self._sequence[channel]

@@ -18,6 +18,7 @@ from hydrojet_bench.bench.settings import bench_settings
 from hydrojet_bench.model_choice import build_model
 from hydrojet_bench.estimation import OnlineSettings
 from hydrojet_bench.logs import read_log
+from hydrojet_bench.logs.topics import Event, ValveCommand
 from hydrojet_bench.plans import calibration_plan, validation_sweeps
 from hydrojet_bench.profile import load_profile
 
@@ -76,7 +77,7 @@ def test_valves_are_closed_when_the_session_ends(finished_session):
     session, _ = finished_session
     assert session._devices.valve_emulator.duties_permille == (0, 0, 0)
     log = read_log(session.request.log_path, topics=["/valves/command"])
-    assert log.messages[-1].data["jet_forces_n"] == [0.0, 0.0, 0.0]
+    assert log.messages[-1].jet_forces_n == (0.0, 0.0, 0.0)
     assert not log.truncated
 
 
@@ -133,9 +134,9 @@ def test_cancelling_a_session_closes_the_valves_and_finishes_the_log(tmp_path):
     assert not session._devices.twin.jet_forces_n.any()
     contents = read_log(log_path)
     assert not contents.truncated
-    commands = [m.data["jet_forces_n"] for m in contents.on("/valves/command")]
+    commands = [m.jet_forces_n for m in contents.on(ValveCommand)]
     assert any(max(forces) > 0 for forces in commands)
-    events = [m.data["message"] for m in contents.on("/events")]
+    events = [m.message for m in contents.on(Event)]
     assert any("interrupted" in message for message in events)
 
 
@@ -155,7 +156,7 @@ def test_a_lost_device_stops_the_session_with_a_clear_error_and_valves_closed(tm
     assert session._devices.valve_emulator.duties_permille == (0, 0, 0)
     contents = read_log(log_path)
     assert not contents.truncated
-    assert any("EM tracker lost" in m.data["message"] for m in contents.on("/events"))
+    assert any("EM tracker lost" in m.message for m in contents.on(Event))
 
 
 def test_a_session_with_an_effect_logs_its_parameters(tmp_path):
@@ -166,6 +167,6 @@ def test_a_session_with_an_effect_logs_its_parameters(tmp_path):
     request = make_request(log_path, plan=validation_sweeps(steps_up=1, repetitions=1, settle_s=SETTLE_S),
                            model=model, effects=("pressure_stiffening",), params=params)
     asyncio.run(run_without_leaks(Session(request)))
-    logged = read_log(log_path, topics=["/bench/parameters"]).messages[0].data
-    assert logged["parameters"]["pressure_stiffening.coefficient_1_n"] == 1.5
-    assert logged["effects"] == ["pressure_stiffening"]
+    logged = read_log(log_path, topics=["/bench/parameters"]).messages[0]
+    assert logged.parameters["pressure_stiffening.coefficient_1_n"] == 1.5
+    assert logged.effects == ("pressure_stiffening",)

@@ -15,6 +15,7 @@ from rich.console import Console
 from hydrojet_bench.bench.live_view import LiveView
 from hydrojet_bench.bench.session import SessionStatus
 from hydrojet_bench.logs import read_log
+from hydrojet_bench.logs.topics import Event, ValveCommand
 from hydrojet_bench.plans import PlanStep
 
 
@@ -31,7 +32,7 @@ def wait_for_commands(log_path: Path, timeout_s: float = 120.0) -> None:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if log_path.exists():
-            commands = [m.data["jet_forces_n"] for m in read_log(log_path, topics=["/valves/command"]).messages]
+            commands = [m.jet_forces_n for m in read_log(log_path, topics=["/valves/command"]).messages]
             if any(max(forces) > 0 for forces in commands):
                 return
         time.sleep(0.5)
@@ -53,11 +54,11 @@ def test_a_signal_stops_the_session_cleanly(tmp_path, signal_number, exit_code):
     assert "Traceback" not in output
     contents = read_log(log_path)
     assert not contents.truncated  # finished: summary and footer written
-    assert any("interrupted" in m.data["message"] for m in contents.on("/events"))
+    assert any("interrupted" in m.message for m in contents.on(Event))
     # The session's own last word to the valves: the driver's ALL_OFF is not a logged
     # command, but no command after the interruption may open a jet.
-    interrupted_at = next(m.t_s for m in contents.on("/events") if "interrupted" in m.data["message"])
-    assert all(max(m.data["jet_forces_n"]) == 0 for m in contents.on("/valves/command") if m.t_s > interrupted_at)
+    interrupted_at = next(m.t_s for m in contents.on(Event) if "interrupted" in m.message)
+    assert all(max(m.jet_forces_n) == 0 for m in contents.on(ValveCommand) if m.t_s > interrupted_at)
 
 
 def test_run_reports_a_bad_plan_file_without_traceback(tmp_path):

@@ -15,6 +15,7 @@ from hydrojet_bench.bench.settings import bench_settings
 from hydrojet_bench.cli import main
 from hydrojet_bench.model_choice import build_model
 from hydrojet_bench.logs import LogWriter
+from hydrojet_bench.logs.topics import Sample
 from hydrojet_bench.plans import calibration_plan, validation_sweeps
 from hydrojet_bench.profile import load_profile
 
@@ -78,10 +79,9 @@ def test_a_log_without_imu_samples_is_a_user_error(tmp_path, capsys):
     profile = load_profile("sim")
     with LogWriter(path, metadata={"bench": {"profile_name": "sim", "profile_toml": profile.path.read_text()}}) as log:
         for i in range(3):
-            log.write("/bench/sample", {"t_s": 0.025 * i, "source": "em", "jet_forces_n": [0.0, 0.0, 0.0],
-                                        "sweep": -1, "step": 0, "base_orientation": [0.0, 1.0, 0.0, 0.0],
-                                        "tip_orientation": [0.0, 1.0, 0.0, 0.0], "base_position_m": None,
-                                        "tip_position_m": None}, t_s=0.025 * i)
+            log.write(Sample(t_s=0.025 * i, source="em", jet_forces_n=(0.0, 0.0, 0.0), sweep=-1, step=0,
+                             base_orientation=(0.0, 1.0, 0.0, 0.0), tip_orientation=(0.0, 1.0, 0.0, 0.0),
+                             base_position_m=None, tip_position_m=None))
     assert main(["sensors", str(path)]) == 2
     error = capsys.readouterr().err  # wrapped by rich at spaces
     assert "no IMU samples" in " ".join(error.split()) and str(path) in error.replace("\n", "")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 from log_examples import EXAMPLES
@@ -13,7 +14,8 @@ from hydrojet_bench.commands.common import load_steps
 from hydrojet_bench.data import Dataset, SampleFlag, load_dataset, read_csv, saturation_flags, write_csv
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.geometry import quat_normalize
-from hydrojet_bench.logs import LogWriter, dataset_from_log, read_log
+from hydrojet_bench.logs import LogWriter, dataset_from_log, floats, read_log
+from hydrojet_bench.logs.topics import Sample
 from hydrojet_bench.profile import PROFILES_DIR, load_profile
 
 SIM = load_profile("sim")
@@ -36,23 +38,25 @@ def recorded_rows(rows: int = 60, seed: int = 3) -> Dataset:
                    source="hand-made")
 
 
-def sample(dataset: Dataset, i: int, source: str = "em") -> dict:
+def sample(dataset: Dataset, i: int, source: str = "em", t_s: float | None = None) -> Sample:
+    """Row ``i`` as the bench logs it, at its own time unless ``t_s`` is given."""
     has_positions = source == "em"
-    return {"source": source, "jet_forces_n": dataset.jet_forces_n[i], "sweep": dataset.sweep[i],
-            "step": dataset.step[i], "base_orientation": dataset.base_orientation[i],
-            "tip_orientation": dataset.tip_orientation[i],
-            "base_position_m": dataset.base_position_m[i] if has_positions else None,
-            "tip_position_m": dataset.tip_position_m[i] if has_positions else None}
+    return Sample(t_s=float(dataset.time_s[i] if t_s is None else t_s), source=source,
+                  jet_forces_n=floats(dataset.jet_forces_n[i]), sweep=int(dataset.sweep[i]), step=int(dataset.step[i]),
+                  base_orientation=floats(dataset.base_orientation[i]),
+                  tip_orientation=floats(dataset.tip_orientation[i]),
+                  base_position_m=floats(dataset.base_position_m[i]) if has_positions else None,
+                  tip_position_m=floats(dataset.tip_position_m[i]) if has_positions else None)
 
 
 def write_session(path: Path, dataset: Dataset, metadata=SIM_METADATA, imu: bool = True) -> Path:
     """The rows as the bench logs them: EM samples among IMU samples and other topics."""
     with LogWriter(path, metadata=metadata) as log:
         for i, t_s in enumerate(dataset.time_s):
-            log.write("/em/frame", EXAMPLES["/em/frame"], t_s=t_s)
-            log.write("/bench/sample", sample(dataset, i), t_s=t_s)
+            log.write(msgspec.structs.replace(EXAMPLES["/em/frame"], t_s=t_s))
+            log.write(sample(dataset, i))
             if imu:
-                log.write("/bench/sample", sample(dataset, i, "imu"), t_s=t_s)
+                log.write(sample(dataset, i, "imu"))
     return path
 
 
@@ -96,9 +100,9 @@ def test_a_truncated_log_gives_the_samples_before_the_cut(tmp_path: Path) -> Non
     rows = recorded_rows()
     log = LogWriter(path, metadata=SIM_METADATA, flush_interval_s=1e6)
     for i in range(40):
-        log.write("/bench/sample", sample(rows, i), t_s=rows.time_s[i])
+        log.write(sample(rows, i))
     log.flush()
-    log.write("/bench/sample", sample(rows, 40), t_s=rows.time_s[40])  # never flushed: lost
+    log.write(sample(rows, 40))  # never flushed: lost
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(path.read_bytes())
     log.close()
@@ -123,17 +127,17 @@ def test_log_problems_name_the_file(tmp_path: Path) -> None:
         dataset_from_log(wrong)
 
     with LogWriter(tmp_path / "mixed.mcap") as log:
-        log.write("/bench/sample", sample(rows, 0), t_s=0.0)
-        log.write("/bench/sample", {**sample(rows, 1), "tip_position_m": None}, t_s=0.1)
+        log.write(sample(rows, 0, t_s=0.0))
+        log.write(msgspec.structs.replace(sample(rows, 1, t_s=0.1), tip_position_m=None))
     with pytest.raises(UserError, match=r"mixed.mcap, message at t_s=0.1 s: /bench/sample.tip_position_m is null"):
         dataset_from_log(tmp_path / "mixed.mcap", SIM)
     with LogWriter(tmp_path / "backwards.mcap") as log:
-        log.write("/bench/sample", sample(rows, 0), t_s=1.0)
-        log.write("/bench/sample", sample(rows, 1), t_s=0.5)
+        log.write(sample(rows, 0, t_s=1.0))
+        log.write(sample(rows, 1, t_s=0.5))
     with pytest.raises(UserError, match="backwards.mcap: /bench/sample .em.: Dataset.time_s row 1: time goes back"):
         dataset_from_log(tmp_path / "backwards.mcap", SIM)
     with LogWriter(tmp_path / "pulling.mcap") as log:
-        log.write("/bench/sample", {**sample(rows, 0), "jet_forces_n": [0.0, -0.01, 0.0]}, t_s=0.0)
+        log.write(msgspec.structs.replace(sample(rows, 0, t_s=0.0), jet_forces_n=(0.0, -0.01, 0.0)))
     with pytest.raises(UserError, match="pulling.mcap, message at t_s=0.0 s: .*jet forces must be >= 0 N"):
         dataset_from_log(tmp_path / "pulling.mcap", SIM)
     (tmp_path / "notes.mcap").write_text("t,q1\n")

@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import msgspec
 import pytest
 from log_examples import METADATA, cut_inside_chunk, events_log, small_log
 from mcap.reader import make_reader
@@ -22,12 +23,13 @@ from hydrojet_bench.logs import read_log, read_metadata, recover_log
 WRITER = """
 import sys, time
 from hydrojet_bench.logs import LogWriter
+from hydrojet_bench.logs.topics import Event
 with LogWriter(sys.argv[1], metadata={"bench": {"profile_name": "sim"}}, flush_interval_s=1.0) as log:
     start = time.monotonic()
     index = 0
     while True:
         t_s = time.monotonic() - start
-        log.write("/events", {"level": "info", "source": "test", "message": str(index)}, t_s=t_s)
+        log.write(Event(t_s=t_s, level="info", source="test", message=str(index)))
         print(repr(t_s), flush=True)
         index += 1
         time.sleep(0.005)
@@ -54,7 +56,7 @@ def test_sigkill_loses_about_one_flush_interval_at_most(tmp_path: Path) -> None:
     contents = read_log(path)
     assert contents.truncated and contents.metadata == {"bench": {"profile_name": "sim"}}
     kept = contents.messages
-    assert [m.data["message"] for m in kept] == [str(i) for i in range(len(kept))]  # a prefix, in order
+    assert [m.message for m in kept] == [str(i) for i in range(len(kept))]  # a prefix, in order
     assert kept, "nothing survived"
     # The writer flushes once 1 s has passed since the last flush, so what was written
     # after the last flush spans 1 s plus one message interval (0.5 s of slack for a
@@ -66,7 +68,7 @@ def test_sigkill_loses_about_one_flush_interval_at_most(tmp_path: Path) -> None:
     with (tmp_path / "recovered.mcap").open("rb") as handle:
         reader = make_reader(handle)
         assert reader.get_summary() is not None
-        assert [json.loads(m.data) for _, _, m in reader.iter_messages()] == [m.data for m in kept]
+        assert [json.loads(m.data) for _, _, m in reader.iter_messages()] == [msgspec.to_builtins(m) for m in kept]
     assert read_log(tmp_path / "recovered.mcap").messages == kept
 
 

@@ -1,23 +1,26 @@
-"""LogWriter and read_log on complete logs: every topic round trips, JSON encoding,
-schemas, metadata, flushing, and what other MCAP readers see."""
+"""LogWriter and read_log on complete logs: every topic round trips, stored schemas,
+what the writer refuses, malformed messages, metadata, flushing, and what other MCAP
+readers see."""
 
 from __future__ import annotations
 
 import json
-import math
 import shutil
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from json_schema_check import schema_problem
 from log_examples import EXAMPLES, METADATA, QUATERNION, START_TIME_UNIX_S, small_log, write_all_topics
 from mcap.reader import make_reader
+from mcap.writer import Writer
 
+from hydrojet_bench.cli import main
 from hydrojet_bench.errors import UserError
-from hydrojet_bench.logs import TOPICS, LogWriter, read_log, read_metadata, schema_problem
-from hydrojet_bench.logs.codec import decode, encode, jsonable
+from hydrojet_bench.logs import TOPICS, LogError, LogWriter, read_log, read_metadata
+from hydrojet_bench.logs.schemas import schema_name, topic_schema
+from hydrojet_bench.logs.topics import EmFrame, Event, FrameTransform, Sample, SceneUpdate
 
 
 def test_every_topic_round_trips(tmp_path: Path) -> None:
@@ -29,20 +32,23 @@ def test_every_topic_round_trips(tmp_path: Path) -> None:
     times = [m.t_s for m in contents.messages]
     assert times == sorted(times) and times[0] == 0.0
     by_topic = {m.topic: m for m in contents.messages[:len(TOPICS)]}
-    for topic, message in EXAMPLES.items():
-        data = by_topic[topic].data
-        assert data == {"t_s": by_topic[topic].t_s, **jsonable(message)}, topic
-    # numpy arrays, float32 and int64 came back as plain JSON values; NaN as null.
-    assert by_topic["/bench/sample"].data["base_orientation"] == QUATERNION.tolist()
-    assert by_topic["/imu/raw"].data["accel_m_s2"] == [float(np.float32(v)) for v in (0.1, -9.8, 0.2)]
-    assert by_topic["/em/frame"].data["tools"][1]["rms_error_mm"] is None
-    transform = by_topic["/tf"].data
+    for topic, record in EXAMPLES.items():
+        if topic != "/em/frame":
+            assert by_topic[topic] == msgspec.structs.replace(record, t_s=by_topic[topic].t_s), topic
+    # numpy scalars came back as plain numbers; NaN as None where the field may be null.
+    assert by_topic["/bench/sample"].base_orientation == tuple(QUATERNION.tolist())
+    assert by_topic["/imu/raw"].accel_m_s2 == tuple(float(np.float32(v)) for v in (0.1, -9.8, 0.2))
+    frame = by_topic["/em/frame"]
+    assert type(frame.frame_number) is int and frame.frame_number == 1234
+    assert frame.tools[1].rms_error_mm is None and frame.tools[0] == EXAMPLES["/em/frame"].tools[0]
+    transform = by_topic["/tf"]
     w, x, y, z = QUATERNION
-    assert transform["rotation"] == {"x": x, "y": y, "z": z, "w": w}
-    assert transform["translation"] == {"x": 0.01, "y": 0.0, "z": 0.068}
-    assert (transform["parent_frame_id"], transform["child_frame_id"]) == ("base", "tip")
-    line = by_topic["/scene/backbone"].data["entities"][0]["lines"][0]
-    assert line["type"] == 0 and len(line["points"]) == 5 and line["points"][-1] == {"x": 0.01, "y": 0.0, "z": 0.068}
+    assert msgspec.to_builtins(transform.rotation) == {"x": x, "y": y, "z": z, "w": w}
+    assert msgspec.to_builtins(transform.translation) == {"x": 0.01, "y": 0.0, "z": 0.068}
+    assert (transform.parent_frame_id, transform.child_frame_id) == ("base", "tip")
+    line = by_topic["/scene/backbone"].entities[0].lines[0]
+    assert line.type == 0 and len(line.points) == 5 and msgspec.to_builtins(line.points[-1]) == {
+        "x": 0.01, "y": 0.0, "z": 0.068}
 
 
 def test_foxglove_timestamps_are_log_times(tmp_path: Path) -> None:
@@ -64,73 +70,41 @@ def test_stored_messages_conform_to_their_schemas(tmp_path: Path) -> None:
         assert summary is not None and summary.statistics.message_count == len(TOPICS)
         for schema, channel, message in reader.iter_messages():
             assert channel.message_encoding == "json" and schema.encoding == "jsonschema"
-            assert schema.name == TOPICS[channel.topic][0]
+            assert schema.name == schema_name(TOPICS[channel.topic])
             stored_schema = json.loads(schema.data)
-            assert stored_schema == TOPICS[channel.topic][1]
-            assert schema_problem(stored_schema, json.loads(message.data)) is None, channel.topic
+            assert stored_schema == topic_schema(TOPICS[channel.topic])
+            assert schema_problem(stored_schema, json.loads(message.data), channel.topic) is None
     assert {s.name for s in summary.schemas.values()} >= {"foxglove.FrameTransform", "foxglove.SceneUpdate"}
 
 
-def _viewer_problems(schema: dict, where: str) -> list[str]:
-    """What Foxglove's and Lichtblick's JSON-schema reader (parseJsonSchema in their
-    mcap-support package) cannot turn into a message definition: a root or nested object
-    without "properties", a field whose "type" is not one type name, an array without
-    typed "items"."""
-    problems = [] if isinstance(schema.get("properties"), dict) else [f"{where}: object without properties"]
-    for name, field in schema.get("properties", {}).items():
-        kind = field.get("type")
-        if kind not in ("boolean", "string", "number", "integer", "object", "array"):
-            problems.append(f"{where}.{name}: type {kind!r}")
-        elif kind == "object":
-            problems += _viewer_problems(field, f"{where}.{name}")
-        elif kind == "array":
-            items = field.get("items", {})
-            if items.get("type") not in ("boolean", "string", "number", "integer", "object"):
-                problems.append(f"{where}.{name}: array items of type {items.get('type')!r}")
-            elif items["type"] == "object":
-                problems += _viewer_problems(items, f"{where}.{name}[]")
-    return problems
-
-
-def test_schemas_are_readable_by_foxglove_and_lichtblick() -> None:
-    for topic, (_, schema) in TOPICS.items():
-        assert schema["type"] == "object" and _viewer_problems(schema, topic) == []
-    assert _viewer_problems({"type": "object", "properties": {"a": {"type": ["array", "null"]}}}, "t") == [
-        "t.a: type ['array', 'null']"]
-
-
 @pytest.mark.parametrize(("topic", "change", "problem"), [
-    ("/bench/sample", {"source": "optical"}, "/bench/sample.source: must be one of 'em', 'imu'"),
-    ("/bench/sample", {"sweep": -2}, "/bench/sample.sweep: must be >= -1"),
-    ("/bench/sample", {"tip_orientation": [1.0, 0.0, 0.0]}, "tip_orientation: expected 4 items, got 3"),
-    ("/bench/sample", {"jet_forces_n": [0.1, float("nan"), 0.0]}, "jet_forces_n[1]: expected number, got null"),
-    ("/bench/sample", {"step": 1.5}, "/bench/sample.step: expected integer, got float 1.5"),
-    ("/em/frame", {"tools": [{"name": "tip"}]}, "/em/frame.tools[0].handle: required field missing"),
-    ("/valves/reply", {"ok": "yes"}, "/valves/reply.ok: expected boolean"),
-    ("/bench/parameters", {"parameters": {"E0": "soft"}}, "/bench/parameters.parameters.E0: expected number"),
-    ("/events", {"level": "debug"}, "/events.level: must be one of"),
+    ("/bench/sample", {"source": "optical"}, "/bench/sample.source: Invalid enum value 'optical'"),
+    ("/bench/sample", {"sweep": -2}, "/bench/sample.sweep: Expected `int` >= -1"),
+    ("/bench/sample", {"tip_orientation": (1.0, 0.0, 0.0)}, "/bench/sample.tip_orientation: Expected `array` of length"),
+    ("/bench/sample", {"jet_forces_n": (0.1, float("nan"), 0.0)}, "jet_forces_n[1]: Expected `float`, got `null`"),
+    ("/bench/sample", {"step": 1.5}, "/bench/sample.step: Expected `int`, got `float`"),
+    ("/em/frame", {"tools": ({"name": "tip"},)}, "/em/frame.tools[0]: Object missing required field `handle`"),
+    ("/valves/reply", {"ok": "yes"}, "/valves/reply.ok: Expected `bool`, got `str`"),
+    ("/bench/parameters", {"parameters": {"E0": "soft"}}, "/bench/parameters.parameters[...]: Expected `float`"),
+    ("/events", {"level": "debug"}, "/events.level: Invalid enum value 'debug'"),
+    ("/events", {"message": 1j}, "/events: cannot write complex 1j in a log message"),
 ])
-def test_writer_rejects_messages_that_break_the_schema(tmp_path: Path, topic, change, problem) -> None:
+def test_writer_rejects_records_its_reader_would_refuse(tmp_path: Path, topic, change, problem) -> None:
+    # Struct fields are not checked on construction; the writer checks what it encoded.
     with LogWriter(tmp_path / "run.mcap") as log:
         with pytest.raises(ValueError) as error:
-            log.write(topic, {**EXAMPLES[topic], **change}, t_s=1.0)
+            log.write(msgspec.structs.replace(EXAMPLES[topic], **change))
         assert problem in str(error.value)
-        missing = dict(EXAMPLES[topic])
-        missing.pop(next(iter(missing)))
-        with pytest.raises(ValueError, match="required field missing"):
-            log.write(topic, missing, t_s=1.0)
     assert read_log(tmp_path / "run.mcap").messages == []
 
 
-def test_writer_rejects_unknown_topics_and_bad_times(tmp_path: Path) -> None:
+def test_writer_rejects_what_is_not_a_record_and_bad_times(tmp_path: Path) -> None:
     with LogWriter(tmp_path / "run.mcap") as log:
-        with pytest.raises(ValueError, match="unknown log topic '/em/frames'"):
-            log.write("/em/frames", EXAMPLES["/em/frame"], t_s=0.0)
+        with pytest.raises(ValueError, match="not a log record: dict; records: Sample, "):
+            log.write({"t_s": 0.0, "level": "info", "source": "test", "message": "x"})
         with pytest.raises(ValueError, match="t_s must be a finite number"):
-            log.write("/events", EXAMPLES["/events"], t_s=float("nan"))
-        with pytest.raises(ValueError, match="says 2.0 s but was written at t_s=1.0"):
-            log.write("/events", {**EXAMPLES["/events"], "t_s": 2.0}, t_s=1.0)
-        log.write("/events", {**EXAMPLES["/events"], "t_s": 1.0}, t_s=1.0)  # agreeing t_s is fine
+            log.write(msgspec.structs.replace(EXAMPLES["/events"], t_s=float("nan")))
+        log.write(msgspec.structs.replace(EXAMPLES["/events"], t_s=1.0))  # refusals leave the log writable
         with pytest.raises(ValueError, match="not finite"):
             log.write_backbone(1.0, [[0.0, 0.0, float("nan")]])
         with pytest.raises(ValueError, match=r"expected shape \(4,\)"):
@@ -170,7 +144,7 @@ def test_flush_hands_everything_written_to_the_file(tmp_path: Path) -> None:
         write_all_topics(log, 0.0)
         assert len(read_log(shutil.copy(path, tmp_path / "auto.mcap")).messages) == len(TOPICS)
     with pytest.raises(ValueError, match="closed"):
-        log.write("/events", EXAMPLES["/events"], t_s=0.0)
+        log.write(EXAMPLES["/events"])
     log.close()  # closing twice is harmless
 
 
@@ -178,55 +152,39 @@ def test_log_is_finished_when_the_session_fails(tmp_path: Path) -> None:
     path = tmp_path / "run.mcap"
     with pytest.raises(RuntimeError):
         with LogWriter(path) as log:
-            log.write("/events", EXAMPLES["/events"], t_s=0.5)
+            log.write(msgspec.structs.replace(EXAMPLES["/events"], t_s=0.5))
             raise RuntimeError("valve controller lost")
     contents = read_log(path)
     assert not contents.truncated and len(contents.messages) == 1
 
 
-# --- JSON encoding ---------------------------------------------------------------------
+# --- messages a reader refuses -------------------------------------------------------
 
-finite_or_not = st.floats(allow_nan=True, allow_infinity=True)
-
-
-def _expected(value: float) -> float | None:
-    return value if math.isfinite(value) else None
-
-
-leaves = st.one_of(
-    st.none(), st.booleans(), st.text(max_size=8), st.integers(-2**62, 2**62),
-    finite_or_not.map(lambda v: (v, _expected(v))),
-    finite_or_not.map(lambda v: (np.float64(v), _expected(v))),
-    st.floats(width=32, allow_nan=True).map(lambda v: (np.float32(v), _expected(float(np.float32(v))))),
-    st.integers(-2**31, 2**31).map(lambda v: (np.int64(v), v)),
-    st.lists(finite_or_not, max_size=5).map(lambda vs: (np.array(vs, dtype=float), [_expected(v) for v in vs])),
-).map(lambda leaf: leaf if isinstance(leaf, tuple) else (leaf, leaf))
-values = st.recursive(leaves, lambda children: st.one_of(
-    st.lists(children, max_size=4).map(lambda pairs: ([raw for raw, _ in pairs], [exp for _, exp in pairs])),
-    st.lists(children, max_size=4).map(lambda pairs: (tuple(raw for raw, _ in pairs), [exp for _, exp in pairs])),
-    st.dictionaries(st.text(max_size=6), children, max_size=4).map(
-        lambda items: ({k: raw for k, (raw, _) in items.items()}, {k: exp for k, (_, exp) in items.items()})),
-), max_leaves=12)
-
-
-@settings(max_examples=150, deadline=None)
-@given(values)
-def test_json_encoding_is_exact_and_has_no_nan(pair) -> None:
-    raw, expected = pair
-    encoded = encode(jsonable(raw))
-    assert b"NaN" not in encoded and b"Infinity" not in encoded
-    assert decode(encoded) == expected  # floats bit for bit (== on floats, None for non-finite)
+def test_a_malformed_message_is_a_log_error_naming_file_topic_and_field(tmp_path: Path, capsys) -> None:
+    """As another program (or a bug) could write it: a whole message, in a valid chunk,
+    that its topic's record type cannot read."""
+    path = tmp_path / "odd.mcap"
+    with path.open("wb") as handle:
+        writer = Writer(handle)
+        writer.start()
+        schema = writer.register_schema("hydrojet_bench.Sample", "jsonschema", b"{}")
+        samples = writer.register_channel("/bench/sample", "json", schema)
+        other = writer.register_channel("/their/topic", "json", schema)
+        writer.add_message(other, log_time=0, publish_time=0, data=b'"not ours, not read"')
+        writer.add_message(samples, log_time=500_000_000, publish_time=500_000_000,
+                           data=json.dumps({"t_s": 0.5, "source": "em", "jet_forces_n": [0.0, 0.0]}).encode())
+        writer.finish()
+    with pytest.raises(LogError, match=r"odd.mcap, message at t_s=0.5 s: /bench/sample.jet_forces_n: Expected "
+                                       r"`array` of length >= 3"):
+        read_log(path)
+    assert read_log(path, topics=["/events"]).messages == []  # other topics, and unknown ones, are not read
+    assert main(["sensors", str(path)]) == 2  # a user's problem: one line, no traceback
+    error = " ".join(capsys.readouterr().err.split())  # the CLI's console wraps long lines
+    assert "odd.mcap, message at t_s=0.5 s: /bench/sample.jet_forces_n: Expected" in error and "Traceback" not in error
 
 
-def test_json_encoding_refuses_what_json_cannot_hold() -> None:
-    with pytest.raises(ValueError, match=r"message.a\[1\]: cannot write complex"):
-        jsonable({"a": [1, 2j]})
-    with pytest.raises(ValueError, match="keys must be strings"):
-        jsonable({1: "x"})
-
-
-def test_schema_checker_refuses_keywords_it_does_not_know() -> None:
-    with pytest.raises(ValueError, match="pattern"):
-        schema_problem({"type": "string", "pattern": "^a"}, "b")
-    assert schema_problem({"type": "integer"}, 3.0) is None  # JSON Schema: 3.0 is an integer
-    assert schema_problem({"type": "integer"}, True) == "message: expected integer, got bool True"
+def test_records_are_read_by_type(tmp_path: Path) -> None:
+    contents = read_log(small_log(tmp_path / "run.mcap", chunks=2))
+    assert [type(m) for m in contents.on(Sample)] == [Sample, Sample]
+    assert [m.topic for m in contents.on(EmFrame)] == ["/em/frame"] * 2
+    assert len(contents.on(Event)) == len(contents.on(FrameTransform)) == len(contents.on(SceneUpdate)) == 2
