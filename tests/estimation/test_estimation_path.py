@@ -17,7 +17,7 @@ from hydrojet_bench.bench.replay import logged_steps, read_session
 from hydrojet_bench.bench.session import Session, SessionRequest
 from hydrojet_bench.bench.settings import bench_settings
 from hydrojet_bench.cli import main
-from hydrojet_bench.commands.common import build_model
+from hydrojet_bench.model_choice import build_model
 from hydrojet_bench.estimation import OnlineSettings
 from hydrojet_bench.estimation.path import PathPredictor
 from hydrojet_bench.models import CosseratModel
