@@ -30,12 +30,12 @@ from drivers.aurora.errors import (
     AuroraError,
     AuroraProtocolError,
     AuroraTimeoutError,
+    ErrorCode,
 )
 from drivers.aurora.frames import ReplyOption, TrackingFrame, decode_bx, decode_tx_text
 from drivers.aurora.poses import TrackedFrame, TrackedPose
 from drivers.aurora.replies import (
     DataReply,
-    ErrorCode,
     ErrorReply,
     OkayReply,
     PhsrMode,

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.aurora.commands import Command, parse_command
-from drivers.aurora.errors import AuroraProtocolError
+from drivers.aurora.errors import AuroraProtocolError, ErrorCode
 from drivers.aurora.frames import (
     BX_START,
     HandleStatus,
@@ -46,7 +46,6 @@ from drivers.aurora.frames import (
     parse_reply_option,
 )
 from drivers.aurora.replies import (
-    ErrorCode,
     ErrorReply,
     OkayReply,
     PhsrMode,

@@ -17,41 +17,6 @@ from drivers.aurora.errors import AuroraProtocolError
 CR = b"\r"
 
 
-class ErrorCode(IntEnum):
-    """Device error codes used by this driver (NDI Aurora API Guide, ERROR table)."""
-
-    INVALID_COMMAND = 0x01
-    BAD_CRC = 0x04
-    PARAMETER_COUNT = 0x07
-    INVALID_PORT_HANDLE = 0x08
-    INVALID_MODE = 0x0C  # command not valid in the current operating mode
-    PORT_NOT_INITIALISED = 0x0E
-    NOT_INITIALISED = 0x10
-    CANNOT_INITIALISE_HANDLE = 0x13
-    PARAMETER_RANGE = 0x23
-
-
-_DESCRIPTIONS = {
-    ErrorCode.INVALID_COMMAND: "invalid command",
-    ErrorCode.BAD_CRC: "bad CRC in command",
-    ErrorCode.PARAMETER_COUNT: "wrong number of parameters",
-    ErrorCode.INVALID_PORT_HANDLE: "invalid port handle",
-    ErrorCode.INVALID_MODE: "command not valid in the current mode",
-    ErrorCode.PORT_NOT_INITIALISED: "port handle not initialised",
-    ErrorCode.NOT_INITIALISED: "system not initialised",
-    ErrorCode.CANNOT_INITIALISE_HANDLE: "cannot initialise port handle",
-    ErrorCode.PARAMETER_RANGE: "parameter out of range",
-}
-
-
-def error_description(code: int) -> str:
-    """Human-readable meaning of a device error code."""
-    try:
-        return _DESCRIPTIONS[ErrorCode(code)]
-    except ValueError:
-        return "unknown error"
-
-
 @dataclass(frozen=True)
 class OkayReply:
     """``OKAY``: the command was accepted."""

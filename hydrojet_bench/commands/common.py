@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..data import load_dataset
+from ..inputs import load_dataset
 from ..data.dataset import Dataset
 from ..models import MODELS
 from ..profile import RigProfile

@@ -18,7 +18,7 @@ from rich.panel import Panel
 from ..analysis.diagnosis import NONE, UNEXPLAINED, Diagnosis, DiagnosisSettings, diagnose
 from ..analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
 from ..analysis.diagnosis.noise import repeatability_floor
-from ..data import load_dataset
+from ..inputs import load_dataset
 from ..effects import load_effect
 from ..errors import ConvergenceError, UserError
 from ..model_choice import COSSERAT, ModelChoice, model_choice

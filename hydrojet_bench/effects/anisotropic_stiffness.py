@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, ClassVar
 from .base import EffectParameter
 
 if TYPE_CHECKING:
-    from ..models.problem import RodProblem
+    from .problem import RodProblem
 
 # At a ratio of 2 (or 1/2) one axis is 41 % stiffer and the other 29 % softer than their
 # mean: a section that uneven is a visibly bad part. Symmetric in the logarithm.

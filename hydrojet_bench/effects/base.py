@@ -1,6 +1,6 @@
 """The effect interface: a named piece of physics that both models compose.
 
-An effect edits a `RodProblem` (see `hydrojet_bench.models.problem` for everything it may
+An effect edits a `RodProblem` (see `hydrojet_bench.effects.problem` for everything it may
 change) given the values of its own parameters. It never touches a solver, so the same
 effect works in the Cosserat and the PRB model, and a user can write one in a file of
 their own and load it as ``path/to/my_effect.py:ClassName``.
@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, ClassVar, Protocol, runtime_checkable
 if TYPE_CHECKING:
     import numpy as np
 
-    from ..models.problem import RodProblem
+    from .problem import RodProblem
     from ..params import ModelParameters
 
 

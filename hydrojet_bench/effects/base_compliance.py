@@ -10,7 +10,7 @@ import numpy as np
 from .base import EffectParameter
 
 if TYPE_CHECKING:
-    from ..models.problem import RodProblem
+    from .problem import RodProblem
 
 # The rod's own bending compliance is 1 / EI = 1e4 rad/(N m) per metre at E0, i.e.
 # ~10 rad/(N m) per millimetre of free rod. 100 rad/(N m) is a clamp as soft as ~10 mm

@@ -9,7 +9,7 @@ from .base import EffectParameter
 from .base_compliance import COMPLIANCE_BOUNDS_RAD_PER_NM, add_clamp_bending_compliance
 
 if TYPE_CHECKING:
-    from ..models.problem import RodProblem
+    from .problem import RodProblem
 
 # 0.05 rad (3 degrees) of play is a visibly loose clamp; the EM tracker resolves 0.7
 # degrees, so plays from ~0.01 rad up are measurable.

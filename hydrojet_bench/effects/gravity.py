@@ -10,7 +10,7 @@ import numpy as np
 from .base import EffectParameter
 
 if TYPE_CHECKING:
-    from ..models.problem import RodProblem
+    from .problem import RodProblem
 
 
 class Gravity:

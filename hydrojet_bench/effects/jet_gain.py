@@ -10,7 +10,7 @@ import numpy as np
 from .base import EffectParameter
 
 if TYPE_CHECKING:
-    from ..models.problem import RodProblem
+    from .problem import RodProblem
 
 # 0 is a fully blocked nozzle. 1.5 (half again the commanded force) is already far
 # outside any plausible valve-to-force calibration error; a 0.15 N command then gives

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, ClassVar
 from .base import EffectParameter
 
 if TYPE_CHECKING:
-    from ..models.problem import RodProblem
+    from .problem import RodProblem
 
 # Jets sit 120 degrees apart: past +-60 degrees a misalignment is a relabelling of the
 # jets, not a misalignment. +-30 degrees covers a capsule glued on, or a rod clamped,

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, ClassVar
 from .base import EffectParameter
 
 if TYPE_CHECKING:
-    from ..models.problem import RodProblem
+    from .problem import RodProblem
 
 # The surface strain of the section is k r (13 % at 30 1/m for r = 4.5 mm), and a
 # hyperelastic or fibre-laden section changes its tangent stiffness by a factor of order

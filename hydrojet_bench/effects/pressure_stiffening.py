@@ -10,7 +10,7 @@ import numpy as np
 from .base import EffectParameter, scale_modulus
 
 if TYPE_CHECKING:
-    from ..models.problem import RodProblem
+    from .problem import RodProblem
 
 # The total commanded jet force stands in for the lumen pressure (thrust ~ pressure x
 # nozzle area). Upper 4 /N: EI x 1.6 at one jet's full 0.15 N, x 2.8 with all three at

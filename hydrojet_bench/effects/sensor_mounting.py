@@ -9,7 +9,7 @@ from ..geometry import so3_exp
 from .base import EffectParameter
 
 if TYPE_CHECKING:
-    from ..models.problem import RodProblem
+    from .problem import RodProblem
 
 # 0.25 rad (14 degrees) per axis: a coil or IMU glued into the 9.8 mm capsule by eye is
 # off by a few degrees; anything near the bound is an assembly fault you can see.

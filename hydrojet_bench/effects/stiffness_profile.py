@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, ClassVar
 from .base import EffectParameter, scale_modulus
 
 if TYPE_CHECKING:
-    from ..models.problem import RodProblem
+    from .problem import RodProblem
 
 # -0.5 halves E at mid-span, +0.5 adds half: an elastomer mixed or cured that unevenly
 # along 70 mm is a bad batch; it also keeps E well above zero everywhere.

@@ -7,7 +7,7 @@ from typing import Protocol, runtime_checkable
 
 from ..errors import UserError
 from ..params import ModelParameters
-from .problem import RodProblem
+from ..effects.problem import RodProblem
 from .shooting import CosseratModel, PrbModel, PreparedProblem, ShootingModel, Solution
 
 __all__ = ["CosseratModel", "KinematicModel", "PrbModel", "PreparedProblem", "RodProblem",

@@ -19,7 +19,7 @@ import numpy as np
 from scipy.integrate import solve_bvp
 
 from ..errors import ConvergenceError
-from .problem import RodProblem
+from ..effects.problem import RodProblem
 
 
 def solve_reference(problem: RodProblem, *, tolerance: float = 1e-8, max_nodes: int = 100_000,

@@ -28,7 +28,7 @@ from ..errors import ConvergenceError
 from ..geometry import quat_from_matrix, se3, so3_exp
 from ..params import ModelParameters
 from . import kernels
-from .problem import RodProblem
+from ..effects.problem import RodProblem
 
 # Shooting residual tolerance (nondimensional, see kernels). 1e-10 of the characteristic
 # load puts tip positions within ~1e-11 L of the exact discrete equilibrium, so finite-

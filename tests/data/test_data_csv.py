@@ -10,9 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hydrojet_bench.data import (REQUIRED_COLUMNS, Dataset, SampleFlag, load_dataset, read_csv,
+from hydrojet_bench.data import (REQUIRED_COLUMNS, Dataset, SampleFlag, read_csv,
                                  saturation_flags, write_csv)
 from hydrojet_bench.errors import UserError
+from hydrojet_bench.inputs import load_dataset
 from hydrojet_bench.profile import RigProfile, load_profile
 
 PROFILE = RigProfile(name="test", max_jet_force_n=(0.15, 0.15, 0.15))

@@ -12,7 +12,7 @@ from hydrojet_bench.effects import EffectParameter
 from hydrojet_bench.estimation import OnlineDisturbanceEstimator, OnlineSettings
 from hydrojet_bench.geometry import rotation_angle_deg
 from hydrojet_bench.models import CosseratModel, PrbModel
-from hydrojet_bench.models.problem import RodProblem
+from hydrojet_bench.effects.problem import RodProblem
 from hydrojet_bench.params import ModelParameters
 
 PARAMS = ModelParameters(gravity_in_base_m_s2=(-9.81, 0.0, 0.0))

@@ -8,7 +8,6 @@ import asyncio
 import json
 from dataclasses import replace
 
-import grimp
 import numpy as np
 import pytest
 
@@ -99,15 +98,6 @@ def test_a_dataset_is_predicted_as_its_steps_one_at_a_time(steps):
             for a, b in zip(fields(getattr(one, method)), fields(getattr(offline, method)), strict=True):
                 np.testing.assert_array_equal(a, b)
         assert (one.error_before_deg, one.iterations) == (offline.error_before_deg, offline.iterations)
-
-
-@pytest.mark.parametrize(("importer", "imported"), [("bench", "analysis"), ("estimation", "analysis"),
-                                                    ("estimation", "bench")])
-def test_the_bench_and_the_predictor_stand_below_the_analysis(importer, imported):
-    graph = grimp.build_graph("hydrojet_bench")
-    chain = graph.find_shortest_chain(importer=f"hydrojet_bench.{importer}", imported=f"hydrojet_bench.{imported}",
-                                      as_packages=True)
-    assert chain is None, " -> ".join(chain)
 
 
 # --- a live session against `compare LOG --online` ------------------------------------

@@ -11,7 +11,8 @@ import pytest
 from log_examples import EXAMPLES
 
 from hydrojet_bench.commands.common import load_steps
-from hydrojet_bench.data import Dataset, SampleFlag, load_dataset, read_csv, saturation_flags, write_csv
+from hydrojet_bench.data import Dataset, SampleFlag, read_csv, saturation_flags, write_csv
+from hydrojet_bench.inputs import load_dataset
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.geometry import quat_normalize
 from hydrojet_bench.logs import LogWriter, dataset_from_log, floats, read_log

@@ -13,7 +13,7 @@ from hydrojet_bench.effects import EffectParameter
 from hydrojet_bench.errors import ConvergenceError
 from hydrojet_bench.geometry import adjoint, se3
 from hydrojet_bench.models import CosseratModel, PrbModel, make_model
-from hydrojet_bench.models.problem import RodProblem
+from hydrojet_bench.effects.problem import RodProblem
 from hydrojet_bench.params import ModelParameters, with_parameters
 
 ACROSS = ModelParameters(gravity_in_base_m_s2=(-9.81, 0.0, 0.0))

@@ -18,7 +18,7 @@ from scipy.optimize import brentq
 
 from hydrojet_bench.effects import EffectParameter
 from hydrojet_bench.models import CosseratModel, PrbModel
-from hydrojet_bench.models.problem import RodProblem
+from hydrojet_bench.effects.problem import RodProblem
 from hydrojet_bench.models.reference import solve_reference
 from hydrojet_bench.params import (CapsuleParameters, DisturbanceWrench, JetLayout, ModelParameters,
                                    RodParameters)
