@@ -51,7 +51,7 @@ from ..profile import RigProfile
 from .clock import Clock, ScaledClock
 from .live_estimation import StepEstimate, StepEstimation
 from .recorder import StepRecorder
-from .settings import BenchSettings, SIM
+from ..config import SIM, RigConfig
 from .simulated_rig import SimulatedDevices, simulated_devices
 
 # Consecutive stream failures after which a device counts as lost and the session stops.
@@ -90,7 +90,7 @@ class SessionRequest:
     included)."""
 
     profile: RigProfile
-    settings: BenchSettings
+    settings: RigConfig
     plan: Plan
     log_path: Path
     model: ShootingModel
@@ -141,7 +141,7 @@ class Session:
     def __init__(self, request: SessionRequest, clock: Clock | None = None,
                  on_update: Callable[[SessionStatus], None] | None = None) -> None:
         self.request = request
-        self.clock = clock or ScaledClock(request.settings.timing.time_scale)
+        self.clock = clock or ScaledClock(request.settings.session.time_scale)
         self.status = SessionStatus(len(request.plan))
         self.on_update = on_update or (lambda status: None)
         profile = request.profile
@@ -174,7 +174,7 @@ class Session:
         }}
         completed = 0
         with LogWriter(request.log_path, metadata=metadata,
-                       flush_interval_s=request.settings.timing.flush_interval_s) as log:
+                       flush_interval_s=request.settings.session.flush_interval_s) as log:
             self._log = log
             self._write_parameters()
             try:
@@ -228,7 +228,7 @@ class Session:
             # The first solve of a process loads the compiled kernels (about a second; far
             # longer on a busy machine): done now, before any valve is armed.
             await asyncio.to_thread(request.model.solve, np.zeros(3), self.params)
-            valves = ValveController(valves_url, calibrations=settings.valves.calibrations,
+            valves = ValveController(valves_url, calibrations=settings.valve_calibrations(),
                                      retries=settings.valves.retries,
                                      reply_timeout_s=settings.valves.reply_timeout_ms / 1000.0,
                                      heartbeat_interval_s=settings.valves.heartbeat_ms / 1000.0)
@@ -255,8 +255,8 @@ class Session:
         imu = self.request.settings.imu
         lock = threading.Lock()
         chips = []
-        for address, calibration in ((imu.base_address, imu.base_calibration),
-                                     (imu.tip_address, imu.tip_calibration)):
+        for address, calibration in ((imu.base_address, imu.base.calibration()),
+                                     (imu.tip_address, imu.tip.calibration())):
             driver = Icm20948(bus, address, clock=self.clock.now, calibration=calibration,
                               sleep=lambda seconds: time.sleep(seconds / self.clock.time_scale))
             chip = AsyncIcm20948(driver, bus_lock=lock)
@@ -371,7 +371,7 @@ class Session:
     async def _play(self, valves: ValveController) -> int:
         request = self.request
         status = self.status
-        timing = request.settings.timing
+        timing = request.settings.session
         remaining = request.plan.duration_s
         for index, step in enumerate(request.plan):
             if step.sweep != CALIBRATION_SWEEP:
@@ -437,7 +437,7 @@ class Session:
 
     async def _estimate(self, index: int, settled: Dataset, t_s: float) -> None:
         if self.estimation is None:
-            online = self.request.settings.estimator.online_settings if self.request.settings.estimator.online else None
+            online = self.request.settings.estimator.online_settings() if self.request.settings.estimator.online else None
             self.estimation = StepEstimation(self.request.model, self.params, online)
         try:
             # In a worker thread: a slow solve must never delay the valve heartbeat.
