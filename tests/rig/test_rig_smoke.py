@@ -18,8 +18,8 @@ from drivers.aurora.client import AuroraTracker
 from drivers.imu import Icm20948
 from drivers.valve.client import ValveController
 from hydrojet_bench.bench.clock import ScaledClock
-from hydrojet_bench.bench.settings import SIM, bench_settings
 from hydrojet_bench.bench.simulated_rig import simulated_devices
+from hydrojet_bench.config import SIM
 from hydrojet_bench.profile import load_profile
 
 pytestmark = pytest.mark.rig
@@ -29,7 +29,7 @@ pytestmark = pytest.mark.rig
 async def rig_devices(profile_spec: str):
     """(profile, settings, valves URL, tracker URL, I2C bus) of the rig under test."""
     profile = load_profile(profile_spec)
-    settings = bench_settings(profile)
+    settings = profile.config
     transports = settings.transports
     async with contextlib.AsyncExitStack() as stack:
         valves, tracker, bus = transports.valves, transports.tracker, None
@@ -46,7 +46,7 @@ async def rig_devices(profile_spec: str):
 def test_valve_controller_answers_status_with_valves_closed(rig_profile, run_async):
     async def check():
         async with rig_devices(rig_profile) as (_, settings, valves_url, _, _):
-            async with ValveController(valves_url, calibrations=settings.valves.calibrations) as valves:
+            async with ValveController(valves_url, calibrations=settings.valve_calibrations()) as valves:
                 status = await valves.status()
                 assert status.armed and not status.faults
                 assert status.duties_permille == (0, 0, 0), "valves open before any command"
