@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
 
+import msgspec
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -178,6 +179,11 @@ class RigProfile:
     @property
     def description(self) -> str:
         return self.config.description
+
+    def with_tables(self, **tables: msgspec.Struct) -> RigProfile:
+        """This rig with whole tables of its configuration replaced, e.g.
+        ``gravity=GravityTable(in_tracker_m_s2=(9.81, 0.0, 0.0))``."""
+        return RigProfile(msgspec.structs.replace(self.config, **tables), self.path)
 
     @property
     def source(self) -> str:
