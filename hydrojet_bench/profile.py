@@ -29,7 +29,7 @@ The profile format (tables, keys, units, defaults, ``extends``) is documented in
 place, `hydrojet_bench.config.schema`; `RigProfile.config` is the typed tree every part
 of the bench reads (devices, session, estimator, twin). Every error is a `UserError`
 naming the file and the dotted key, e.g. ``profiles/x.toml: rod.length_m must be a
-number > 0.0, got -0.07``.
+finite number > 0, got -0.07``.
 """
 
 from __future__ import annotations
@@ -50,6 +50,10 @@ from .params import CapsuleParameters, JetLayout, ModelParameters, RodParameters
 
 Vector3 = tuple[float, float, float]
 Quaternion = tuple[float, float, float, float]
+
+__all__ = ["PROFILES_DIR", "RigProfile", "SensorMounting", "SensorPoses", "hanging_orientation", "load_profile",
+           "profile_from_mapping"]
+
 
 def _unit_quaternion(value: ArrayLike) -> np.ndarray:
     q = np.asarray(value, dtype=float)

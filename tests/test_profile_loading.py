@@ -238,7 +238,7 @@ _KEYS = st.sampled_from(["in_tracker_m_s2", "length_m", "max_force_n", "settle_s
                          "tools", "imu_bus", "valves", "calibration", "jet1", "force_n", "model", "extends",
                          "orientation_in_tracker", "true_parameters", "hidden_effect_values", "base", "tip"])
 _TABLES = st.sampled_from(["gravity", "base", "rod", "jets", "transports", "tracker", "imu", "valves", "session",
-                           "estimator", "twin", "rood", "name"])
+                           "estimator", "twin", "rood", "name", "extends"])
 
 
 @given(st.dictionaries(_TABLES, st.dictionaries(_KEYS, _VALUES, max_size=3) | _VALUES, max_size=4))

@@ -1,17 +1,11 @@
 """Reading typed TOML files: profiles (with ``extends``) and any other `msgspec` schema.
 
-Every problem is a `UserError` of one line, ``"<file>: <dotted.key> <what was expected>,
-got <value>"``; an unknown key suggests the nearest known one.
+Every problem is a `UserError` of one line naming the file (`messages` words it).
 """
 
 from __future__ import annotations
 
-import difflib
-import re
-import sys
 import tomllib
-import types
-import typing
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
@@ -19,19 +13,13 @@ from typing import Any, TypeVar
 import msgspec
 
 from ..errors import UserError
+from .messages import explain, first_missing
 from .schema import RigConfig
 
 T = TypeVar("T")
 
 # Where the shipped profiles live (a checkout or an editable install).
 PROFILES_DIR = Path(__file__).resolve().parents[2] / "profiles"
-
-_PATH = re.compile(r"^(?P<message>.*?)(?: - at `\$(?P<path>[^`]*)`)?$", re.DOTALL)
-_EXPECTED = re.compile(r"^Expected `")
-_MISSING = re.compile(r"^Object missing required field `(?P<field>[^`]+)`$")
-_UNKNOWN = re.compile(r"^Object contains unknown field `(?P<field>[^`]+)`$")
-_LARGEST_FLOAT = sys.float_info.max
-_SCALAR_WORDS = {float: "a number", int: "an integer", str: "a string", bool: "true or false"}
 
 
 def read_toml(path: Path, what: str = "file") -> dict[str, Any]:
@@ -52,23 +40,12 @@ def convert(document: Mapping[str, Any], schema: type[T], source: str) -> T:
     """``document`` as a ``schema`` instance; ``source`` names the document in errors."""
     # msgspec reports missing fields after every other problem; a missing required table
     # is the one to fix first.
-    if missing := _first_missing(document, schema):
+    if missing := first_missing(document, schema):
         raise UserError(f"{source}: {missing} is required")
     try:
         return msgspec.convert(document, schema)
     except msgspec.ValidationError as error:
-        raise UserError(f"{source}: {_explain(str(error), document, schema)}") from None
-
-
-def _first_missing(document: Mapping[str, Any], schema: type) -> str | None:
-    """The dotted key of the first required field absent at the top level of
-    ``document``, down to the first required key of an absent required table."""
-    for field in msgspec.structs.fields(schema):
-        if field.required and field.encode_name not in document:
-            table = _struct_in(field.type)
-            inner = _first_missing({}, table) if table is not None else None
-            return _join(field.encode_name, inner) if inner else field.encode_name
-    return None
+        raise UserError(f"{source}: {explain(str(error), document, schema)}") from None
 
 
 def resolve_profile_path(spec: str | Path, relative_to: Path | None = None) -> Path:
@@ -134,197 +111,3 @@ def _merge(parent: Mapping[str, Any], child: Mapping[str, Any]) -> dict[str, Any
         else:
             merged[key] = value
     return merged
-
-
-# --- error messages ------------------------------------------------------------------
-
-
-def _explain(error: str, document: Mapping[str, Any], schema: type) -> str:
-    """msgspec's ``"Expected `float` > 0.0 - at `$.rod.length_m`"`` as ``"rod.length_m
-    must be a number > 0.0, got -0.07"``."""
-    match = _PATH.match(error)
-    assert match is not None  # the pattern matches any text
-    message, raw_path = match["message"], match["path"] or ""
-    parts = _pinpoint(_path_parts(raw_path), document, schema)
-    dotted = _dotted(parts)
-    if found := _MISSING.match(message):
-        return f"{_join(dotted, found['field'])} is required"
-    if found := _UNKNOWN.match(message):
-        return f"{_join(dotted, found['field'])} is not a known key{_suggestion(found['field'], schema, parts)}"
-    if _EXPECTED.match(message):
-        expected = _phrase(_annotation_at(schema, parts))
-        return f"{dotted or 'the file'} must be {expected}, got {_describe(_value_at(document, parts))}"
-    # A check in a table's __post_init__: its message starts with the field's name.
-    if dotted and not message.startswith(f"{dotted}."):
-        return f"{dotted}.{message}"
-    return message
-
-
-def _path_parts(raw_path: str) -> list[str | int | None]:
-    """``.rod.length_m`` / ``.g[1]`` / ``.m[...]`` as keys, indices and None (any key)."""
-    parts: list[str | int | None] = []
-    for name, index in re.findall(r"\.([^.\[]+)|\[([^\]]*)\]", raw_path):
-        if name:
-            parts.append(name)
-        else:
-            parts.append(int(index) if index.isdigit() else None)
-    return parts
-
-
-def _pinpoint(parts: list[str | int | None], document: Mapping[str, Any], schema: type) -> list[str | int | None]:
-    """msgspec names a bad value in a key -> value table ``[...]``: find its key."""
-    if not parts or parts[-1] is not None or not isinstance(parts[-2] if len(parts) > 1 else None, str):
-        return parts
-    table = _struct_at(schema, parts[:-2])
-    entries = _value_at(document, parts[:-1])
-    if table is None or not isinstance(entries, Mapping):
-        return parts
-    value_type = typing.get_args(typing.get_type_hints(table, include_extras=True).get(parts[-2]))[-1:]
-    for key, value in entries.items():
-        try:
-            msgspec.convert(value, *value_type)
-        except (msgspec.ValidationError, TypeError):
-            return [*parts[:-1], key]
-    return parts
-
-
-def _dotted(parts: list[str | int | None]) -> str:
-    text = ""
-    for part in parts:
-        if isinstance(part, str):
-            # TOML quotes a key with a dot in it ("gravity.weight_scale").
-            part = f'"{part}"' if "." in part else part
-            text += f".{part}" if text else part
-        else:
-            text += f"[{'...' if part is None else part}]"
-    return text
-
-
-def _join(dotted: str, field: str) -> str:
-    return f"{dotted}.{field}" if dotted else field
-
-
-def _value_at(document: Any, parts: list[str | int | None]) -> Any:
-    value = document
-    for part in parts:
-        if part is None:
-            return _MISSING_VALUE
-        try:
-            value = value[part]
-        except (KeyError, IndexError, TypeError):
-            return _MISSING_VALUE
-    return value
-
-
-_MISSING_VALUE = object()
-
-
-def _describe(value: Any) -> str:
-    if value is _MISSING_VALUE:
-        return "another type"
-    if isinstance(value, Mapping):
-        return "a table"
-    return repr(value)
-
-
-def _suggestion(field: str, schema: type, parts: list[str | int | None]) -> str:
-    """``"; did you mean `session`?"`` with the table's keys, from the schema at ``parts``."""
-    table = _struct_at(schema, parts)
-    if table is None:
-        return ""
-    known = list(table.__struct_fields__)
-    close = difflib.get_close_matches(field, known, n=1, cutoff=0.75)
-    hint = f"; did you mean {close[0]}?" if close else ""
-    where = f"[{_dotted(parts)}]" if parts else "a profile"
-    return f"{hint} ({where} takes {', '.join(known)})"
-
-
-def _annotation_at(schema: type, parts: list[str | int | None]) -> Any:
-    """The schema's type for the value at ``parts``."""
-    current: Any = schema
-    for part in parts:
-        current = _member_for(_without_none(current), part)
-        origin, arguments = typing.get_origin(current), typing.get_args(current)
-        if isinstance(part, str) and _struct_in(current) is not None:
-            current = typing.get_type_hints(_struct_in(current), include_extras=True).get(part)
-        elif origin is dict:
-            current = arguments[1]
-        elif origin is tuple and isinstance(part, int):
-            current = arguments[0] if arguments[-1] is Ellipsis else arguments[min(part, len(arguments) - 1)]
-        else:
-            return None
-    return current
-
-
-def _member_for(annotation: Any, part: str | int | None) -> Any:
-    """The member of a union (``float | tuple[float, ...]``) that an index or key enters."""
-    if typing.get_origin(annotation) not in (typing.Union, types.UnionType):
-        return annotation
-    for member in typing.get_args(annotation):
-        origin = typing.get_origin(member)
-        if (origin is tuple and isinstance(part, int)) or \
-                (isinstance(part, str) and (origin is dict or _struct_in(member) is not None)):
-            return member
-    return annotation
-
-
-def _without_none(annotation: Any) -> Any:
-    arguments = [a for a in typing.get_args(annotation) if a is not type(None)]
-    if typing.get_origin(annotation) in (typing.Union, types.UnionType) and len(arguments) == 1:
-        return arguments[0]
-    return annotation
-
-
-def _phrase(annotation: Any) -> str:
-    """What a value of the schema type ``annotation`` looks like, in words."""
-    annotation = _without_none(annotation)
-    origin, arguments = typing.get_origin(annotation), typing.get_args(annotation)
-    if origin is typing.Annotated:
-        described = [meta.description for meta in arguments[1:] if getattr(meta, "description", None)]
-        if described:
-            return described[0]
-        words = _SCALAR_WORDS.get(arguments[0], "a value")
-        bounds = []
-        for meta in arguments[1:]:
-            for name, symbol in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<=")):
-                bound = getattr(meta, name, None)
-                if bound is None:
-                    continue
-                if abs(bound) == _LARGEST_FLOAT:
-                    words = words.replace("a number", "a finite number")
-                else:
-                    bounds.append(f"{symbol} {bound:g}" if isinstance(bound, float) else f"{symbol} {bound}")
-        return " ".join([words, " and ".join(bounds)]).strip()
-    if origin in (typing.Union, types.UnionType):
-        return " or ".join(_phrase(a) for a in arguments if a is not type(None))
-    if origin is tuple:
-        item = _phrase(arguments[0]).removeprefix("a ").removeprefix("an ")
-        item = item.replace("number", "numbers").replace("string", "strings").replace("list ", "lists ")
-        if arguments[-1] is Ellipsis:
-            return f"a list of {item}"
-        return f"a list of {len(arguments)} {item}"
-    if origin is dict:
-        return f"a table of {_phrase(arguments[1]).removeprefix('a ')}s"
-    if _struct_in(annotation) is not None:
-        return "a table"
-    return _SCALAR_WORDS.get(annotation, "a value of another type")
-
-
-def _struct_at(schema: type, parts: list[str | int | None]) -> type | None:
-    current: Any = schema
-    for part in parts:
-        current = _struct_in(current)
-        if current is None or not isinstance(part, str):
-            return None
-        current = typing.get_type_hints(current).get(part)
-    return _struct_in(current)
-
-
-def _struct_in(annotation: Any) -> type | None:
-    """The Struct type inside ``annotation`` (``X``, ``X | None``), if any."""
-    if isinstance(annotation, type) and issubclass(annotation, msgspec.Struct):
-        return annotation
-    for argument in typing.get_args(annotation):
-        if isinstance(argument, type) and issubclass(argument, msgspec.Struct):
-            return argument
-    return None

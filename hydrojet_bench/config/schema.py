@@ -10,6 +10,7 @@ optional except ``[gravity] in_tracker_m_s2``; unknown tables and keys are error
 
     extends = "sim"        # optional: a shipped profile's name or a path relative to this
                            # file; its tables are merged under this file's, key by key
+                           # (lists are replaced whole; the name is never inherited)
     name = "hydrojet-v1"   # default: the file name without .toml
     description = "..."
 
@@ -19,8 +20,9 @@ optional except ``[gravity] in_tracker_m_s2``; unknown tables and keys are error
 
 Frames (see `hydrojet_bench.profile`): the *tracker frame* the sensors are measured in,
 the *base frame* of the clamp (z along the undeformed rod, base to tip) and the *tip
-frame* at s = L. Quaternions are (w, x, y, z), scalar first, and must be of unit norm
-within 1e-3 (a typed-in quaternion with four digits is accepted and renormalised).
+frame* at s = L. Quaternions are (w, x, y, z), scalar first, of unit norm within
+`QUATERNION_NORM_TOLERANCE` (a typed-in quaternion with four digits is accepted and
+renormalised).
 
 Checks that involve a field and its table (a quaternion's norm, heartbeat against
 watchdog) raise `ValueError` from ``__post_init__`` with a message that starts with the
@@ -126,8 +128,8 @@ class TipSensorTable(Table, kw_only=True):
 class RodTable(Table, kw_only=True):
     """The soft rod, E linear in arc length from base to tip (`params.RodParameters`)."""
 
-    length_m: Positive = _ROD.length_m
-    radius_m: Positive = _ROD.radius_m
+    length_m: Positive = _ROD.length_m              # L, clamp face to tip, m
+    radius_m: Positive = _ROD.radius_m              # solid circular section, m
     density_kg_m3: Positive = _ROD.density_kg_m3
     # Thermodynamic bounds of an isotropic solid; 0.5 is incompressible.
     poisson_ratio: Annotated[float, msgspec.Meta(gt=-1.0, le=0.5)] = _ROD.poisson_ratio
@@ -139,7 +141,7 @@ class RodTable(Table, kw_only=True):
 
 
 class CapsuleTable(Table, kw_only=True):
-    mass_kg: NonNegative = _CAPSULE.mass_kg
+    mass_kg: NonNegative = _CAPSULE.mass_kg  # camera, jets and sensor included
     center_of_mass_in_tip_m: Vector3 = _CAPSULE.center_of_mass_in_tip_m  # tip frame, m
 
     def parameters(self) -> CapsuleParameters:
@@ -231,8 +233,8 @@ class ImuTable(Table, kw_only=True):
     madgwick_gain: Positive = 0.041        # Madgwick filter beta, rad/s
     use_magnetometer: bool = True
     gyro_bias_samples: Annotated[int, msgspec.Meta(ge=0)] = 100  # at rest, before the first command
-    base: ImuChipTable = msgspec.field(default_factory=ImuChipTable)
-    tip: ImuChipTable = msgspec.field(default_factory=ImuChipTable)
+    base: ImuChipTable = msgspec.field(default_factory=ImuChipTable)  # [imu.base]: the base chip's correction
+    tip: ImuChipTable = msgspec.field(default_factory=ImuChipTable)   # [imu.tip]
 
     def __post_init__(self) -> None:
         if self.base_address == self.tip_address:
@@ -242,8 +244,8 @@ class ImuTable(Table, kw_only=True):
 class JetCalibrationTable(Table, kw_only=True):
     """One jet's measured curve: force (N) -> valve duty (per mille)."""
 
-    force_n: tuple[float, ...]
-    duty_permille: tuple[int, ...]
+    force_n: tuple[float, ...]      # strictly increasing, >= 0, N
+    duty_permille: tuple[int, ...]  # the duty (0..1000) giving each force
 
     def __post_init__(self) -> None:
         try:
@@ -267,8 +269,8 @@ class ValveCalibrationTable(Table, kw_only=True):
 class ValvesTable(Table, kw_only=True):
     watchdog_ms: Positive = 500.0       # the firmware's (and emulator's) silence limit
     heartbeat_ms: Positive = 100.0      # host PING when idle this long
-    reply_timeout_ms: Positive = 100.0
-    retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 3
+    reply_timeout_ms: Positive = 100.0  # per request, before a retry
+    retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 3  # resends of an unanswered request
     calibration: ValveCalibrationTable = msgspec.field(default_factory=ValveCalibrationTable)
 
     def __post_init__(self) -> None:
@@ -373,7 +375,7 @@ class RigConfig(Table, kw_only=True):
     """One rig profile, every table typed."""
 
     name: str = "profile"  # the loader fills in the file name without .toml
-    description: str = ""
+    description: str = ""  # one line for people
     gravity: GravityTable
     base: BaseTable = msgspec.field(default_factory=BaseTable)
     base_sensor: BaseSensorTable = msgspec.field(default_factory=BaseSensorTable)
