@@ -13,7 +13,7 @@ from typing import Any, TypeVar
 import msgspec
 
 from ..errors import UserError
-from .messages import explain, first_missing
+from .messages import explain, top_level_problem
 from .schema import RigConfig
 
 T = TypeVar("T")
@@ -38,10 +38,8 @@ def read_toml(path: Path, what: str = "file") -> dict[str, Any]:
 
 def convert(document: Mapping[str, Any], schema: type[T], source: str) -> T:
     """``document`` as a ``schema`` instance; ``source`` names the document in errors."""
-    # msgspec reports missing fields after every other problem; a missing required table
-    # is the one to fix first.
-    if missing := first_missing(document, schema):
-        raise UserError(f"{source}: {missing} is required")
+    if problem := top_level_problem(document, schema):
+        raise UserError(f"{source}: {problem}")
     try:
         return msgspec.convert(document, schema)
     except msgspec.ValidationError as error:

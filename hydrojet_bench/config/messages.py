@@ -26,13 +26,23 @@ _LARGEST_FLOAT = sys.float_info.max
 _SCALAR_WORDS = {float: "a number", int: "an integer", str: "a string", bool: "true or false"}
 
 
-def first_missing(document: Mapping[str, Any], schema: type) -> str | None:
-    """The dotted key of the first required field absent at the top level of
-    ``document``, down to the first required key of an absent required table."""
+def top_level_problem(document: Mapping[str, Any], schema: type) -> str | None:
+    """What msgspec would report late, or not word well, about the top level: an unknown
+    key (a misspelt table, whose correct name would otherwise be reported missing), then
+    the first required field absent, down to the first required key of an absent table."""
+    known = schema.__struct_fields__
+    for key in document:
+        if key not in known:
+            return f"{key} is not a known key{_suggestion(key, schema, [])}"
+    missing = _first_missing(document, schema)
+    return f"{missing} is required" if missing else None
+
+
+def _first_missing(document: Mapping[str, Any], schema: type) -> str | None:
     for field in msgspec.structs.fields(schema):
         if field.required and field.encode_name not in document:
             table = _struct_in(field.type)
-            inner = first_missing({}, table) if table is not None else None
+            inner = _first_missing({}, table) if table is not None else None
             return _join(field.encode_name, inner) if inner else field.encode_name
     return None
 
