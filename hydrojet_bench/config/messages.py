@@ -9,6 +9,7 @@ worded from the schema's own annotation at that path (bounds, list lengths, a
 from __future__ import annotations
 
 import difflib
+import json
 import re
 import sys
 import types
@@ -22,6 +23,7 @@ _PATH = re.compile(r"^(?P<message>.*?)(?: - at `\$(?P<path>[^`]*)`)?$", re.DOTAL
 _EXPECTED = re.compile(r"^Expected `")
 _MISSING = re.compile(r"^Object missing required field `(?P<field>[^`]+)`$")
 _UNKNOWN = re.compile(r"^Object contains unknown field `(?P<field>[^`]+)`$")
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
 _LARGEST_FLOAT = sys.float_info.max
 _SCALAR_WORDS = {float: "a number", int: "an integer", str: "a string", bool: "true or false"}
 
@@ -33,7 +35,7 @@ def top_level_problem(document: Mapping[str, Any], schema: type) -> str | None:
     known = schema.__struct_fields__
     for key in document:
         if key not in known:
-            return f"{key} is not a known key{_suggestion(key, schema, [])}"
+            return f"{_key(key)} is not a known key{_suggestion(key, schema, [])}"
     missing = _first_missing(document, schema)
     return f"{missing} is required" if missing else None
 
@@ -43,7 +45,7 @@ def _first_missing(document: Mapping[str, Any], schema: type) -> str | None:
         if field.required and field.encode_name not in document:
             table = _struct_in(field.type)
             inner = _first_missing({}, table) if table is not None else None
-            return _join(field.encode_name, inner) if inner else field.encode_name
+            return f"{field.encode_name}.{inner}" if inner else field.encode_name
     return None
 
 
@@ -98,16 +100,20 @@ def _dotted(parts: list[str | int | None]) -> str:
     text = ""
     for part in parts:
         if isinstance(part, str):
-            # TOML quotes a key with a dot in it ("gravity.weight_scale").
-            part = f'"{part}"' if "." in part else part
-            text += f".{part}" if text else part
+            text += f".{_key(part)}" if text else _key(part)
         else:
             text += f"[{'...' if part is None else part}]"
     return text
 
 
 def _join(dotted: str, field: str) -> str:
-    return f"{dotted}.{field}" if dotted else field
+    return f"{dotted}.{_key(field)}" if dotted else _key(field)
+
+
+def _key(name: str) -> str:
+    """A key as TOML writes it: bare, or quoted when it has other characters than
+    letters, digits, _ and - (``"gravity.weight_scale"``)."""
+    return name if _BARE_KEY.fullmatch(name) else json.dumps(name)
 
 
 def _value_at(document: Any, parts: list[str | int | None]) -> Any:
