@@ -328,8 +328,12 @@ class SensorNoise(Table, kw_only=True):
 
     em_position_rms_m, em_orientation_rms_deg: EM tracker (NDI Aurora) accuracy, white,
         per sample; the orientation error is a body-frame rotation of the sensor. The
-        defaults are the paper's (sec. V) figures.
-    imu_orientation_rms_deg: white orientation noise of an IMU-fused orientation.
+        defaults are the paper's (sec. V) figures. Both the twin's EM measurements and
+        the session's Aurora emulator use them.
+    imu_orientation_rms_deg: white orientation noise of an IMU-fused orientation (the
+        twin's own IMU measurements; the byte-level ICM-20948 emulators of a session
+        produce raw samples with their own `drivers.imu.emulator.ImuErrorModel`, and the
+        session fuses them).
     imu_drift_deg_per_sqrt_s: random-walk drift of each IMU's reference frame (world
         side): after t seconds the drift angle has RMS ``imu_drift * sqrt(t)``. The IMU
         defaults are illustrative (a fused ICM-20948 with a magnetometer stays within a
