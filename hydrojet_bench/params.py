@@ -21,6 +21,10 @@ import numpy as np
 
 Vector3 = tuple[float, float, float]
 
+# The HydroJet capsule carries three water jets (paper eq. 5); every per-jet tuple has
+# this length.
+JET_COUNT = 3
+
 
 def _check_finite(owner: str, name: str, value: float) -> None:
     if not isinstance(value, (int, float, np.floating, np.integer)) or isinstance(value, bool):
@@ -138,8 +142,8 @@ class JetLayout:
 def actuation_matrix(ring_angle_rad: float) -> np.ndarray:
     """Eq. 5's A for a jet ring rotated by ``ring_angle_rad`` about the tip z axis, padded
     with a zero z row."""
-    angles = _JET1_ANGLE_RAD - _JET_SPACING_RAD * np.arange(3) + ring_angle_rad
-    matrix = np.zeros((3, 3))
+    angles = _JET1_ANGLE_RAD - _JET_SPACING_RAD * np.arange(JET_COUNT) + ring_angle_rad
+    matrix = np.zeros((3, JET_COUNT))
     matrix[0] = np.cos(angles)
     matrix[1] = np.sin(angles)
     return matrix

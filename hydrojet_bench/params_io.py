@@ -16,23 +16,30 @@ parameter file stays valid for any dataset recorded on that rig.
 
 from __future__ import annotations
 
-import math
-import tomllib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
+import msgspec
+
+from .config.loading import convert, read_toml
+from .config.schema import Finite
 from .errors import UserError
 from .params import ModelParameters, with_parameters
 
 
-@dataclass(frozen=True)
-class ParameterFile:
+class ParameterFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """A parameter file, as the module docstring lays it out."""
+
     model: str
-    effects: tuple[str, ...]
-    parameters: dict[str, float]
-    standard_errors: dict[str, float] = field(default_factory=dict)
-    calibration: dict[str, object] = field(default_factory=dict)
+    effects: tuple[str, ...] = ()
+    parameters: dict[str, Finite]
+    standard_errors: dict[str, Finite] = {}
+    calibration: dict[str, Any] = {}
+
+    def __post_init__(self) -> None:
+        if not self.parameters:
+            raise ValueError("parameters is missing or empty")
 
     def apply(self, params: ModelParameters, source: Path | str = "parameters") -> ModelParameters:
         """``params`` with these values; an invalid value is a UserError naming the key."""
@@ -78,31 +85,4 @@ def write_parameter_file(path: Path, content: ParameterFile) -> None:
 
 def read_parameter_file(path: Path) -> ParameterFile:
     """Read and check a parameter file; problems are UserErrors naming the file and key."""
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise UserError(f"{path}: no such parameter file") from None
-    except OSError as error:
-        raise UserError(f"{path}: cannot read: {error.strerror}") from None
-    except tomllib.TOMLDecodeError as error:
-        raise UserError(f"{path}: not valid TOML: {error}") from None
-    model = data.get("model")
-    if not isinstance(model, str):
-        raise UserError(f"{path}: key 'model' must be a string naming the model (cosserat or prb)")
-    effects = data.get("effects", [])
-    if not isinstance(effects, list) or not all(isinstance(e, str) for e in effects):
-        raise UserError(f"{path}: key 'effects' must be a list of effect names")
-    tables = {}
-    for name in ("parameters", "standard_errors"):
-        table = data.get(name, {})
-        if not isinstance(table, dict):
-            raise UserError(f"{path}: [{name}] must be a table of numbers")
-        for key, value in table.items():
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise UserError(f"{path}: [{name}] {key} must be a finite number, got {value!r}")
-        tables[name] = {key: float(value) for key, value in table.items()}
-    if not tables["parameters"]:
-        raise UserError(f"{path}: [parameters] is missing or empty")
-    calibration = data.get("calibration", {})
-    return ParameterFile(model, tuple(effects), tables["parameters"], tables["standard_errors"],
-                         calibration if isinstance(calibration, dict) else {})
+    return convert(read_toml(path, what="parameter file"), ParameterFile, str(path))

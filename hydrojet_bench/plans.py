@@ -24,9 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .params import actuation_matrix
+from .params import JET_COUNT, actuation_matrix
 
-JET_COUNT = 3
 CALIBRATION_SWEEP = -1
 # The paper holds each command 5 s, "higher than the settling time of the body".
 DEFAULT_SETTLE_S = 5.0

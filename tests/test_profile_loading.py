@@ -11,8 +11,13 @@ import pytest
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.geometry import matrix_from_quat, quat_from_rotvec, quat_multiply
 from hydrojet_bench.params import ModelParameters
-from hydrojet_bench.profile import (PROFILES_DIR, RigProfile, SensorMounting, hanging_orientation,
-                                    load_profile)
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hydrojet_bench.config.schema import TwinTable
+from hydrojet_bench.profile import (PROFILES_DIR, SensorMounting, hanging_orientation, load_profile,
+                                    profile_from_mapping)
+from hydrojet_bench.twin import TwinConfig
 
 MINIMAL = "[gravity]\nin_tracker_m_s2 = [0.0, 0.0, -9.81]\n"
 
@@ -35,14 +40,14 @@ def test_shipped_profiles_load_and_make_model_parameters(name: str) -> None:
     assert all(f > 0 for f in profile.max_jet_force_n)
 
 
-def test_shipped_profile_by_name_and_transports_kept_raw() -> None:
+def test_shipped_profile_by_name_and_its_typed_bench_tables() -> None:
     profile = load_profile("hydrojet-v1")
     assert profile.path == PROFILES_DIR / "hydrojet-v1.toml"
-    transports = profile.table("transports")
-    assert transports["valves"] == "serial:///dev/ttyUSB0?baud=115200"
-    assert transports["tracker"].startswith("serial://")
-    assert transports["imu_bus"] == 1
-    assert profile.table("twin") == {}
+    transports = profile.config.transports
+    assert transports.valves == "serial:///dev/ttyUSB0?baud=115200"
+    assert transports.tracker.startswith("serial://")
+    assert transports.imu_bus == 1 and not transports.simulated
+    assert profile.config.twin == TwinTable()
 
 
 def test_minimal_profile_takes_hydrojet_defaults(tmp_path: Path) -> None:
@@ -85,29 +90,31 @@ offset_in_tip_m = [0.0, 0.0, 0.01]
     ("text", "key", "expected"),
     [
         ("", "gravity.in_tracker_m_s2", "is required"),
-        ("[gravity]\nin_tracker_m_s2 = [0, 9.81]\n", "gravity.in_tracker_m_s2", "list of 3 numbers"),
+        ("[gravity]\nin_tracker_m_s2 = [0, 9.81]\n", "gravity.in_tracker_m_s2",
+         "a list of 3 finite numbers, got [0, 9.81]"),
         ("[gravity]\nin_tracker_m_s2 = [0, 0, 0]\n", "gravity.in_tracker_m_s2", "must not be zero"),
         ("[gravity]\nin_tracker_m_s2 = [0, 'down', 0]\n", "gravity.in_tracker_m_s2[1]", "finite number"),
         ("[gravity]\nin_tracker_m_s2 = [0, nan, 0]\n", "gravity.in_tracker_m_s2[1]", "finite number"),
-        (MINIMAL + "[rod]\nlength_m = -0.07\n", "rod.length_m", "must be > 0"),
-        (MINIMAL + "[rod]\nlength_m = '70 mm'\n", "rod.length_m", "must be a number"),
+        (MINIMAL + "[rod]\nlength_m = -0.07\n", "rod.length_m", "must be a finite number > 0, got -0.07"),
+        (MINIMAL + "[rod]\nlength_m = '70 mm'\n", "rod.length_m", "must be a finite number > 0, got '70 mm'"),
         (MINIMAL + "[rod]\nlenght_m = 0.07\n", "rod.lenght_m", "not a known key"),
-        (MINIMAL + "[rod]\npoisson_ratio = 0.7\n", "rod.poisson_ratio", "(-1, 0.5]"),
-        (MINIMAL + "[rod]\nradius_m = inf\n", "rod.radius_m", "must be finite"),
+        (MINIMAL + "[rod]\npoisson_ratio = 0.7\n", "rod.poisson_ratio", "> -1 and <= 0.5, got 0.7"),
+        (MINIMAL + "[rod]\nradius_m = inf\n", "rod.radius_m", "must be a finite number > 0, got inf"),
         (MINIMAL + "[capsule]\nmass_kg = -1\n", "capsule.mass_kg", ">= 0"),
         (MINIMAL + "[capsule]\ncenter_of_mass_in_tip_m = 0.014\n", "capsule.center_of_mass_in_tip_m",
-         "list of 3 numbers"),
-        (MINIMAL + "[jets]\nmax_force_n = 0\n", "jets.max_force_n", "must be > 0"),
-        (MINIMAL + "[jets]\nmax_force_n = [0.1, -0.1, 0.1]\n", "jets.max_force_n[1]", "must be > 0"),
+         "a list of 3 finite numbers, got 0.014"),
+        (MINIMAL + "[jets]\nmax_force_n = 0\n", "jets.max_force_n", "a finite number > 0 or a list"),
+        (MINIMAL + "[jets]\nmax_force_n = [0.1, -0.1, 0.1]\n", "jets.max_force_n[1]", "> 0, got -0.1"),
         (MINIMAL + "[jets]\nmax_force_n = [0.1, 0.1]\n", "jets.max_force_n", "a number or a list of 3"),
-        (MINIMAL + "[jets]\nring_angle_deg = true\n", "jets.ring_angle_deg", "must be a number"),
+        (MINIMAL + "[jets]\nring_angle_deg = true\n", "jets.ring_angle_deg", "must be a finite number, got True"),
         (MINIMAL + "[base]\norientation_in_tracker = [1, 1, 0, 0]\n", "base.orientation_in_tracker",
          "unit quaternion"),
         (MINIMAL + "[base_sensor]\nrotation_in_base = [1, 0, 0]\n", "base_sensor.rotation_in_base",
          "unit quaternion"),
-        (MINIMAL + "[tip_sensor]\noffset_in_tip_m = [0, 0]\n", "tip_sensor.offset_in_tip_m", "3 numbers"),
+        (MINIMAL + "[tip_sensor]\noffset_in_tip_m = [0, 0]\n", "tip_sensor.offset_in_tip_m",
+         "a list of 3 finite numbers"),
         ("rod = 3\n" + MINIMAL, "rod", "must be a table"),
-        ("answer = 42\n" + MINIMAL, "answer", "not a known top-level key"),
+        ("answer = 42\n" + MINIMAL, "answer", "is not a known key (a profile takes name, "),
         (MINIMAL + "name = 7\n", "gravity.name", "not a known key"),
         ("name = 7\n" + MINIMAL, "name", "must be a string"),
     ],
@@ -131,17 +138,128 @@ def test_toml_syntax_and_missing_file_are_user_errors(tmp_path: Path) -> None:
         load_profile("no-such-shipped-profile")
 
 
-def test_unknown_tables_are_kept_raw(tmp_path: Path) -> None:
-    text = MINIMAL + '[twin]\nseed = 3\nhidden = ["gravity"]\n[estimator.online]\ngain = 0.4\n'
-    profile = load_profile(write(tmp_path, text))
-    assert profile.table("twin") == {"seed": 3, "hidden": ["gravity"]}
-    assert profile.table("estimator") == {"online": {"gain": 0.4}}
-    assert set(profile.extra_tables) == {"twin", "estimator"}
+@pytest.mark.parametrize(("text", "key", "suggestion"), [
+    ('[transport]\nvalves = "sim"\n', "transport", "transports"),
+    ("[sesion]\nsettle_s = 5.0\n", "sesion", "session"),
+    ("[valve]\nwatchdog_ms = 500\n", "valve", "valves"),
+    ("[rood]\nlength_m = 0.07\n", "rood", "rod"),
+    ("[session]\nsetle_s = 5.0\n", "session.setle_s", "settle_s"),
+    ("[twin]\nseeds = 3\n", "twin.seeds", "seed"),
+    ("[twin.noise]\nem_position_rms = 0.0\n", "twin.noise.em_position_rms", "em_position_rms_m"),
+    ("[imu.base]\nmag_hard_iron = [0, 0, 0]\n", "imu.base.mag_hard_iron", "mag_hard_iron_ut"),
+])
+def test_misspelt_tables_and_keys_are_refused_with_the_close_match(tmp_path: Path, text: str, key: str,
+                                                                    suggestion: str) -> None:
+    path = write(tmp_path, MINIMAL + text)
+    with pytest.raises(UserError) as info:
+        load_profile(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: {key} is not a known key; did you mean {suggestion}?"), message
+    assert "\n" not in message
+
+
+def test_the_shipped_physical_rig_with_a_misspelt_table_does_not_load(tmp_path: Path) -> None:
+    text = (PROFILES_DIR / "hydrojet-v1.toml").read_text().replace("[transports]", "[transport]")
+    with pytest.raises(UserError, match=r"hydrojet-v1\.toml: transport is not a known key; did you mean transports\?"):
+        load_profile(write(tmp_path, text, "hydrojet-v1.toml"))
+
+
+@pytest.mark.parametrize(("text", "key", "expected"), [
+    ("[session]\nsettle_s = 1.0\nwindow_s = 2.0\n", "session.window_s", "must not exceed session.settle_s"),
+    ('[transports]\nvalves = "COM3"\n', "transports.valves", 'must be "sim", "pty" or a transport URL'),
+    ("[transports]\nimu_bus = -1\n", "transports.imu_bus", "I2C bus number"),
+    ('[tracker]\ntools = ["base", "base"]\n', "tracker.tools", 'each of "base" and "tip" once'),
+    ("[imu]\nbase_address = 0x69\n", "imu.tip_address", "must differ from imu.base_address"),
+    ("[imu]\nbase_address = 0x70\n", "imu.base_address", "must be an integer >= 104 and <= 105, got 112"),
+    ("[valves]\nheartbeat_ms = 300\n", "valves.heartbeat_ms", "below half of valves.watchdog_ms"),
+    ("[valves.calibration]\njet4 = { force_n = [0, 1], duty_permille = [0, 1000] }\n",
+     "valves.calibration.jet4", "is not a known key"),
+    ("[valves.calibration]\njet1 = { force_n = [0.1, 0.0], duty_permille = [0, 1000] }\n",
+     "valves.calibration.jet1.force_n", "is not a valid calibration table"),
+    ('[estimator]\nmodel = "fem"\n', "estimator.model", "must be one of cosserat, prb"),
+    ("[estimator]\ngain = 2.0\n", "estimator.gain", "must be in (0, 1]"),
+    ("[twin]\nseed = 'x'\n", "twin.seed", "must be an integer >= 0, got 'x'"),
+    ("[twin.noise]\nem_orientation_rms_deg = -1.0\n", "twin.noise.em_orientation_rms_deg", ">= 0, got -1.0"),
+    ('[twin.hidden_effect_values]\n"gravity.weight_scale" = "big"\n',
+     'twin.hidden_effect_values."gravity.weight_scale"', "must be a finite number, got 'big'"),
+])
+def test_bench_and_twin_tables_name_file_and_key(tmp_path: Path, text: str, key: str, expected: str) -> None:
+    path = write(tmp_path, MINIMAL + text)
+    with pytest.raises(UserError) as info:
+        load_profile(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: {key} "), message
+    assert expected in message
+
+
+def test_extends_merges_the_child_over_the_parent_key_by_key(tmp_path: Path) -> None:
+    write(tmp_path, MINIMAL + "[rod]\nlength_m = 0.08\nradius_m = 0.005\n[session]\nsettle_s = 4.0\n",
+          "parent.toml")
+    child = load_profile(write(tmp_path, 'extends = "parent.toml"\n[rod]\nlength_m = 0.09\n', "child.toml"))
+    assert child.name == "child"  # a child never inherits its parent's name
+    assert child.rod.length_m == 0.09 and child.rod.radius_m == 0.005
+    assert child.config.session.settle_s == 4.0
+    shipped = load_profile(write(tmp_path, 'extends = "sim"\n[twin]\nseed = 5\n', "mine.toml"))
+    assert shipped.config.twin.seed == 5
+    assert shipped.config.transports == load_profile("sim").config.transports
+    assert shipped.base_sensor == load_profile("sim").base_sensor
+
+
+def test_sim_mystery_is_sim_plus_its_hidden_effect() -> None:
+    sim, mystery = load_profile("sim"), load_profile("sim-mystery")
+    assert mystery.name == "sim-mystery"
+    assert mystery.config.twin.hidden_effects == ("pressure_stiffening",)
+    for table in ("gravity", "base", "base_sensor", "tip_sensor", "rod", "capsule", "jets", "transports",
+                  "tracker", "imu", "valves", "session", "estimator"):
+        assert getattr(mystery.config, table) == getattr(sim.config, table), table
+
+
+@pytest.mark.parametrize(("files", "expected"), [
+    ({"a.toml": 'extends = "b.toml"\n' + MINIMAL, "b.toml": 'extends = "a.toml"\n'}, "makes a cycle"),
+    ({"a.toml": 'extends = "a.toml"\n' + MINIMAL}, "makes a cycle"),
+    ({"a.toml": 'extends = "absent.toml"\n' + MINIMAL}, "extends rig profile 'absent.toml' not found"),
+    ({"a.toml": "extends = 3\n" + MINIMAL}, "extends must be a profile name or a relative path"),
+    ({"a.toml": 'extends = "b.toml"\n', "b.toml": "[gravity\n"}, "b.toml: not valid TOML"),
+])
+def test_extends_errors(tmp_path: Path, files: dict[str, str], expected: str) -> None:
+    for name, text in files.items():
+        write(tmp_path, text, name)
+    with pytest.raises(UserError) as info:
+        load_profile(tmp_path / "a.toml")
+    assert expected in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+_SCALARS = st.one_of(st.none(), st.booleans(), st.integers(-3, 1000), st.floats(allow_nan=True),
+                     st.text(max_size=4), st.sampled_from(["sim", "pty", "cosserat", "base", "tip"]))
+_VALUES = st.recursive(_SCALARS.filter(lambda v: v is not None),
+                       lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner,
+                                                                                    max_size=3),
+                       max_leaves=8)
+_KEYS = st.sampled_from(["in_tracker_m_s2", "length_m", "max_force_n", "settle_s", "window_s", "seed", "noise",
+                         "tools", "imu_bus", "valves", "calibration", "jet1", "force_n", "model", "extends",
+                         "orientation_in_tracker", "true_parameters", "hidden_effect_values", "base", "tip"])
+_TABLES = st.sampled_from(["gravity", "base", "rod", "jets", "transports", "tracker", "imu", "valves", "session",
+                           "estimator", "twin", "rood", "name", "extends"])
+
+
+@given(st.dictionaries(_TABLES, st.dictionaries(_KEYS, _VALUES, max_size=3) | _VALUES, max_size=4))
+@settings(max_examples=150, deadline=None)
+def test_any_profile_document_loads_or_is_a_user_error(document: dict) -> None:
+    document = {"gravity": {"in_tracker_m_s2": [0.0, 0.0, -9.81]}, **document}
+    try:
+        profile = profile_from_mapping(document, source="fuzz.toml")
+        profile.model_parameters()
+        TwinConfig.from_profile(profile)  # the [twin] table's effects and parameters
+    except UserError as error:
+        assert "\n" not in str(error)
+        assert str(error).startswith("fuzz.toml: "), error
 
 
 def test_gravity_in_base_follows_the_measured_base_orientation() -> None:
     mounting = SensorMounting(rotation_in_body=tuple(quat_from_rotvec([0.1, -0.4, 1.2])))
-    profile = RigProfile(gravity_in_tracker_m_s2=(0.0, 0.0, -9.81), base_sensor=mounting)
+    profile = profile_from_mapping({"gravity": {"in_tracker_m_s2": [0.0, 0.0, -9.81]},
+                                    "base_sensor": {"rotation_in_base": list(mounting.rotation_in_body)}})
     rng = np.random.default_rng(4)
     clamp = quat_from_rotvec(rng.normal(size=(20, 3)))
     sensor = quat_multiply(clamp, mounting.rotation_in_body)  # R_sensor = R_clamp R_mount

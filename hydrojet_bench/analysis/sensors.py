@@ -35,11 +35,12 @@ calibrated, constant disturbance), with `analysis.compare`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ..config.schema import BaseTable, GravityTable
 from ..data.dataset import Dataset, average_quaternions
 from ..errors import UserError
 from ..estimation.online import OnlineSettings
@@ -70,7 +71,10 @@ METHOD_LABELS = {"ref": "Ref. (constant disturbance)", "online_em": "Proposed, f
 def imu_profile(profile: RigProfile) -> RigProfile:
     """The rig profile for the IMU samples: the same mountings and rod, with gravity where
     it points in the IMU filters' earth frame."""
-    return replace(profile, gravity_in_tracker_m_s2=IMU_EARTH_GRAVITY_M_S2)
+    # The clamp keeps its orientation: only the frame gravity is expressed in changes.
+    return profile.with_tables(gravity=GravityTable(in_tracker_m_s2=IMU_EARTH_GRAVITY_M_S2),
+                               base=BaseTable(orientation_in_tracker=profile.base_orientation_in_tracker,
+                                              position_in_tracker_m=profile.base_position_in_tracker_m))
 
 
 def slerp(start: np.ndarray, end: np.ndarray, fraction: np.ndarray) -> np.ndarray:

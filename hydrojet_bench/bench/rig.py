@@ -19,9 +19,9 @@ from drivers.aurora.client import AuroraTracker
 from drivers.imu import AsyncIcm20948, Icm20948, ImuPairFusion
 from drivers.valve.client import ValveController
 
+from ..config import SIM, RigConfig
 from ..profile import RigProfile
 from .clock import Clock
-from .settings import SIM, BenchSettings
 from .simulated_rig import SimulatedDevices, simulated_devices
 
 # (level, source, message), as `Session.event` takes them.
@@ -58,7 +58,7 @@ def _ignore(level: str, source: str, message: str) -> None:
 
 
 @contextlib.asynccontextmanager
-async def open_rig(profile: RigProfile, settings: BenchSettings, clock: Clock, *, seed: int | None = None,
+async def open_rig(profile: RigProfile, settings: RigConfig, clock: Clock, *, seed: int | None = None,
                    before_arming: Callable[[], Awaitable[None]] = _nothing,
                    on_event: EventSink = _ignore) -> AsyncIterator[Rig]:
     """Open tracker and IMUs, await ``before_arming`` (anything slow that must not run
@@ -88,7 +88,7 @@ async def open_rig(profile: RigProfile, settings: BenchSettings, clock: Clock, *
                      f"{settings.imu.tip_address:#04x} ready")
         await before_arming()
         valve_settings = settings.valves
-        valves = ValveController(valves_url, calibrations=valve_settings.calibrations,
+        valves = ValveController(valves_url, calibrations=settings.valve_calibrations(),
                                  retries=valve_settings.retries,
                                  reply_timeout_s=valve_settings.reply_timeout_ms / 1000.0,
                                  heartbeat_interval_s=valve_settings.heartbeat_ms / 1000.0)
@@ -98,13 +98,13 @@ async def open_rig(profile: RigProfile, settings: BenchSettings, clock: Clock, *
         yield Rig(valves, tracker, imus, simulated)
 
 
-async def _open_imus(bus, settings: BenchSettings, clock: Clock) -> ImuPair:
+async def _open_imus(bus, settings: RigConfig, clock: Clock) -> ImuPair:
     imu = settings.imu
     # Both chips share one bus: one transfer at a time.
     lock = threading.Lock()
     chips = []
-    for address, calibration in ((imu.base_address, imu.base_calibration),
-                                 (imu.tip_address, imu.tip_calibration)):
+    for address, calibration in ((imu.base_address, imu.base.calibration()),
+                                 (imu.tip_address, imu.tip.calibration())):
         driver = Icm20948(bus, address, clock=clock.now, calibration=calibration,
                           sleep=lambda seconds: time.sleep(seconds / clock.time_scale))
         chip = AsyncIcm20948(driver, bus_lock=lock)

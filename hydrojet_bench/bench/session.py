@@ -48,11 +48,11 @@ from ..effects import effect_values
 from ..geometry import quat_from_matrix
 from ..params import PARAMETER_NAMES, ModelParameters, get_parameter
 from ..plans import CALIBRATION_SWEEP, Plan, PlanStep
+from ..config import RigConfig
 from ..profile import RigProfile
 from .clock import Clock, ScaledClock
 from .recorder import StepRecorder
 from .rig import ImuPair, open_rig
-from .settings import BenchSettings
 from .simulated_rig import SimulatedDevices
 
 # Consecutive stream failures after which a device counts as lost and the session stops.
@@ -91,7 +91,7 @@ class SessionRequest:
     included)."""
 
     profile: RigProfile
-    settings: BenchSettings
+    settings: RigConfig
     plan: Plan
     log_path: Path
     model: ShootingModel
@@ -142,7 +142,7 @@ class Session:
     def __init__(self, request: SessionRequest, clock: Clock | None = None,
                  on_update: Callable[[SessionStatus], None] | None = None) -> None:
         self.request = request
-        self.clock = clock or ScaledClock(request.settings.timing.time_scale)
+        self.clock = clock or ScaledClock(request.settings.session.time_scale)
         self.status = SessionStatus(len(request.plan))
         self.on_update = on_update or (lambda status: None)
         profile = request.profile
@@ -175,7 +175,7 @@ class Session:
         }}
         completed = 0
         with LogWriter(request.log_path, metadata=metadata,
-                       flush_interval_s=request.settings.timing.flush_interval_s) as log:
+                       flush_interval_s=request.settings.session.flush_interval_s) as log:
             self._log = log
             self._write_parameters()
             try:
@@ -330,7 +330,7 @@ class Session:
     async def _play(self, valves: ValveController) -> int:
         request = self.request
         status = self.status
-        timing = request.settings.timing
+        timing = request.settings.session
         remaining = request.plan.duration_s
         for index, step in enumerate(request.plan):
             if step.sweep != CALIBRATION_SWEEP:
@@ -396,7 +396,7 @@ class Session:
 
     async def _estimate(self, index: int, settled: Dataset, t_s: float) -> None:
         if self.estimation is None:
-            online = self.request.settings.estimator.online_settings if self.request.settings.estimator.online else None
+            online = self.request.settings.estimator.online_settings() if self.request.settings.estimator.online else None
             self.estimation = PathPredictor(self.request.model, self.params, online)
         try:
             # In a worker thread: a slow solve must never delay the valve heartbeat.

@@ -26,11 +26,10 @@ from drivers.transport.pty import PtyServer
 from drivers.transport.sim import serve_sim
 from drivers.valve.emulator import ValveEmulator
 
+from ..config import PTY, SIM, RigConfig
 from ..profile import RigProfile
-from ..twin import DigitalTwin
-from ..twin.profile_table import twin_config
+from ..twin import DigitalTwin, TwinConfig
 from .clock import Clock
-from .settings import PTY, SIM, BenchSettings
 
 _instances = itertools.count()
 
@@ -65,11 +64,11 @@ class SimulatedDevices:
 
 
 @contextlib.asynccontextmanager
-async def simulated_devices(profile: RigProfile, settings: BenchSettings, clock: Clock,
+async def simulated_devices(profile: RigProfile, settings: RigConfig, clock: Clock,
                             seed: int | None = None) -> AsyncIterator[SimulatedDevices]:
     """Build the twin and serve an emulator for every device the profile marks "sim" or
     "pty"; the others keep their URLs (a session may mix real and emulated devices)."""
-    config = twin_config(profile) if seed is None else twin_config(profile, seed=seed)
+    config = TwinConfig.from_profile(profile) if seed is None else TwinConfig.from_profile(profile, seed=seed)
     twin = DigitalTwin(config)
     plant = SessionPlant(twin, clock)
     transports = settings.transports
@@ -84,7 +83,10 @@ async def simulated_devices(profile: RigProfile, settings: BenchSettings, clock:
             valves_url = await _serve(stack, transports.valves, f"valves-{suffix}", valve_emulator)
         if transports.tracker in (SIM, PTY):
             tools = {0x0A + index: name for index, name in enumerate(settings.tracker.tools)}
-            aurora_emulator = AuroraEmulator(plant, clock.now, tools, seed=config.seed)
+            # The twin's [twin.noise] is the tracker's: the emulator adds it to the truth.
+            aurora_emulator = AuroraEmulator(plant, clock.now, tools, seed=config.seed,
+                                             position_noise_mm=config.noise.em_position_rms_m * 1000.0,
+                                             orientation_noise_deg=config.noise.em_orientation_rms_deg)
             tracker_url = await _serve(stack, transports.tracker, f"aurora-{suffix}", aurora_emulator)
         imu_bus = None
         if transports.imu_bus == SIM:

@@ -53,10 +53,9 @@ def _plant(args: argparse.Namespace):
 
         return StaticPlant()
     from ..profile import load_profile
-    from ..twin import DigitalTwin
-    from ..twin.profile_table import twin_config
+    from ..twin import DigitalTwin, TwinConfig
 
-    return DigitalTwin(twin_config(load_profile(args.profile)))
+    return DigitalTwin(TwinConfig.from_profile(load_profile(args.profile)))
 
 
 class _ReportingPlant:

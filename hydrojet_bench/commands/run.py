@@ -16,9 +16,9 @@ import shlex
 import signal
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
+import msgspec
 import numpy as np
 from rich.console import Console
 
@@ -53,17 +53,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..bench.plan_choice import choose_plan
     from ..bench.session import SessionRequest
-    from ..bench.settings import bench_settings
 
     profile = load_profile(args.profile)
-    settings = bench_settings(profile)
+    settings = profile.config
     if args.time_scale is not None:
         if not args.time_scale > 0:
             raise UserError(f"--time-scale must be > 0, got {args.time_scale}")
         if not settings.transports.simulated and args.time_scale != 1.0:
             raise UserError("--time-scale applies to the simulated rig only; this profile drives real devices")
-        settings = replace(settings, timing=replace(settings.timing, time_scale=args.time_scale))
-    plan = choose_plan(args.plan, settle_s=settings.timing.settle_s)
+        settings = msgspec.structs.replace(settings, session=msgspec.structs.replace(settings.session,
+                                                                                     time_scale=args.time_scale))
+    plan = choose_plan(args.plan, settle_s=settings.session.settle_s)
     choice = model_choice(args, ModelDefaults(settings.estimator.model, tuple(settings.estimator.effects)))
     model, requested = choice.model, choice.requested
     log_path = args.log or DEFAULT_LOG_DIR / f"{profile.name}-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
                              command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]))
     console = render.console_for(args)
     console.print(f"session on [bold]{profile.name}[/] ({'simulated rig' if settings.transports.simulated else 'rig'}): "
-                  f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.timing.time_scale:g}, "
+                  f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.session.time_scale:g}, "
                   f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; log {log_path}")
     result = asyncio.run(_run_session(request, console, live=not args.no_live and console.is_terminal))
     if result is None:
@@ -102,7 +102,7 @@ async def _run_session(request, console: Console, live: bool):
         task.cancel()
 
     loop.add_signal_handler(signal.SIGTERM, on_sigterm)
-    view_context = LiveView(console, request.settings.timing.time_scale, f"HydroJet bench: {request.profile.name}") \
+    view_context = LiveView(console, request.settings.session.time_scale, f"HydroJet bench: {request.profile.name}") \
         if live else contextlib.nullcontext()
     try:
         with view_context as view:

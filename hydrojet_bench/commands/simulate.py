@@ -16,8 +16,7 @@ from ..data.csv_io import write_csv
 from ..effects import load_effect
 from ..plans import paper_protocol
 from ..profile import load_profile
-from ..twin import DigitalTwin
-from ..twin.profile_table import twin_config
+from ..twin import DigitalTwin, TwinConfig
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -38,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
         changes["hidden_effects"] = tuple(load_effect(spec) for spec in args.hidden)
     if args.seed is not None:
         changes["seed"] = args.seed
-    config = twin_config(profile, **changes)
+    config = TwinConfig.from_profile(profile, **changes)
     hidden = config.hidden_effects
     twin = DigitalTwin(config)
     recording = twin.run_plan(paper_protocol())

@@ -7,12 +7,11 @@ from it, and plays measurement plans (`hydrojet_bench.plans`) in virtual time in
 
 from __future__ import annotations
 
-from .config import (EM_ORIENTATION_RMS_DEG, EM_POSITION_RMS_M, HANGING_BASE_ORIENTATION, JetResponse,
-                     SensorNoise, TwinConfig)
+from .config import HANGING_BASE_ORIENTATION, JetResponse, SensorNoise, TwinConfig
 from ..profile import SensorMounting
 from .recording import TwinRecording
 from .twin import DEFAULT_SAMPLE_RATE_HZ, SENSORS, DigitalTwin, SensorMeasurement
 
-__all__ = ["DEFAULT_SAMPLE_RATE_HZ", "EM_ORIENTATION_RMS_DEG", "EM_POSITION_RMS_M", "HANGING_BASE_ORIENTATION",
+__all__ = ["DEFAULT_SAMPLE_RATE_HZ", "HANGING_BASE_ORIENTATION",
            "SENSORS", "DigitalTwin", "JetResponse", "SensorMeasurement", "SensorMounting", "SensorNoise",
            "TwinConfig", "TwinRecording"]

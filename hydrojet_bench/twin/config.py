@@ -1,7 +1,10 @@
 """What a digital twin is made of: true physics, hidden effects, rig geometry, sensor noise.
 
-Everything is a frozen dataclass that validates itself; a bad value raises `ValueError`
+`TwinConfig` holds the runtime objects a twin is built from (loaded effects, model
+parameters, valve responses); it validates itself, a bad value raising `ValueError`
 naming the field (``TwinConfig.settle_time_constant_s must be ...``).
+`TwinConfig.from_profile` builds one from a rig profile, its ``[twin]`` table included
+(the table's format and defaults: `hydrojet_bench.config.schema.TwinTable`).
 
 Frames (see also `hydrojet_bench.params` and `drivers.plant`):
 
@@ -19,16 +22,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from drivers.valve.protocol import DUTY_MAX_PERMILLE
+
+from ..config.schema import DEFAULT_MAX_JET_FORCE_N, SensorNoise, TwinTable
 from ..effects import Effect, load_effect
+from ..errors import UserError
 from ..geometry import quat_normalize
-from ..params import ModelParameters
+from ..params import JET_COUNT, ModelParameters, with_parameters
 from ..profile import RigProfile, SensorMounting
 
-JET_COUNT = 3
-DUTY_MAX_PERMILLE = 1000
-# NDI Aurora accuracy quoted by the paper (sec. V): 0.48 mm and 0.70 deg RMS.
-EM_POSITION_RMS_M = 0.48e-3
-EM_ORIENTATION_RMS_DEG = 0.70
+_TWIN_DEFAULTS = TwinTable()
 # The default rig hangs the rod from its clamp with the tracker's z axis up: the base
 # frame's z (towards the tip) is the world's -z, a half turn about x.
 HANGING_BASE_ORIENTATION = (0.0, 1.0, 0.0, 0.0)
@@ -126,37 +129,6 @@ class JetResponse:
 
 
 @dataclass(frozen=True)
-class SensorNoise:
-    """Sensor noise of the twin. Totals are RMS over all three axes: each axis gets
-    total / sqrt(3), so the norm of a position error or the angle of an orientation error
-    has the stated RMS.
-
-    em_position_rms_m, em_orientation_rms_deg: EM tracker (NDI Aurora) accuracy, white,
-        per sample; the orientation error is a body-frame rotation of the sensor.
-    imu_orientation_rms_deg: white orientation noise of an IMU-fused orientation.
-    imu_drift_deg_per_sqrt_s: random-walk drift of each IMU's reference frame (world
-        side): after t seconds the drift angle has RMS ``imu_drift * sqrt(t)``. The IMU
-        defaults are illustrative (a fused ICM-20948 with a magnetometer stays within a
-        few tenths of a degree over the ~20 min protocol), not datasheet figures.
-    """
-
-    em_position_rms_m: float = EM_POSITION_RMS_M
-    em_orientation_rms_deg: float = EM_ORIENTATION_RMS_DEG
-    imu_orientation_rms_deg: float = 0.3
-    imu_drift_deg_per_sqrt_s: float = 0.02
-
-    def __post_init__(self) -> None:
-        for name in ("em_position_rms_m", "em_orientation_rms_deg", "imu_orientation_rms_deg",
-                     "imu_drift_deg_per_sqrt_s"):
-            object.__setattr__(self, name, _non_negative("SensorNoise", name, getattr(self, name)))
-
-    @classmethod
-    def off(cls) -> "SensorNoise":
-        """Perfect sensors: measurements equal the truth."""
-        return cls(0.0, 0.0, 0.0, 0.0)
-
-
-@dataclass(frozen=True)
 class TwinConfig:
     """A simulated HydroJet rig.
 
@@ -187,16 +159,16 @@ class TwinConfig:
     true_params: ModelParameters = field(default_factory=ModelParameters)
     hidden_effects: tuple[Effect | str, ...] = ()
     hidden_effect_values: tuple[tuple[str, float], ...] = ()
-    noise: SensorNoise = field(default_factory=SensorNoise)
-    seed: int = 0
+    noise: SensorNoise = _TWIN_DEFAULTS.noise
+    seed: int = _TWIN_DEFAULTS.seed
     base_orientation_in_world: tuple[float, float, float, float] = HANGING_BASE_ORIENTATION
     base_position_in_world_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     gravity_in_world_m_s2: tuple[float, float, float] | None = None
     magnetic_field_in_world_ut: tuple[float, float, float] = DEFAULT_MAGNETIC_FIELD_UT
     base_sensor: SensorMounting = field(default_factory=SensorMounting)
     tip_sensor: SensorMounting = field(default_factory=SensorMounting)
-    settle_time_constant_s: float = 0.5
-    max_force_n: float = 0.1
+    settle_time_constant_s: float = _TWIN_DEFAULTS.settle_time_constant_s
+    max_force_n: float = DEFAULT_MAX_JET_FORCE_N
     jet_response: tuple[JetResponse, JetResponse, JetResponse] | None = None
     resolution: int = 20
 
@@ -265,13 +237,24 @@ class TwinConfig:
     @classmethod
     def from_profile(cls, profile: RigProfile, **changes: object) -> "TwinConfig":
         """The twin of a rig profile: its gravity (tracker frame), clamp pose, sensor
-        mountings and per-jet force limits (linear valve responses up to each limit);
-        true parameters from its rod, capsule and jets unless ``true_params`` is given.
-        ``changes`` are further fields (``hidden_effects=``, ``noise=``, ``seed=`` ...)."""
+        mountings, per-jet force limits (linear valve responses up to each limit) and its
+        ``[twin]`` table (true parameters from the rod, capsule and jets unless the table
+        changes them). ``changes`` are further fields (``hidden_effects=``, ``noise=``,
+        ``seed=`` ...): command-line choices win over the file. A mistake in the profile is
+        a `UserError` naming its file."""
         if not isinstance(profile, RigProfile):
             raise ValueError(f"profile must be a RigProfile, got {type(profile).__name__}")
+        table = profile.config.twin
+        try:
+            true_params = with_parameters(profile.model_parameters(), table.true_parameters)
+        except (KeyError, ValueError) as error:
+            raise UserError(f"{profile.source}: twin.true_parameters {error.args[0]}") from None
+        try:
+            hidden_effects = tuple(load_effect(_effect_spec(spec, profile)) for spec in table.hidden_effects)
+        except UserError as error:
+            raise UserError(f"{profile.source}: twin.hidden_effects: {error}") from None
         values: dict[str, object] = {
-            "true_params": profile.model_parameters(),
+            "true_params": true_params,
             "gravity_in_world_m_s2": profile.gravity_in_tracker_m_s2,
             "base_orientation_in_world": profile.base_orientation_in_tracker,
             "base_position_in_world_m": profile.base_position_in_tracker_m,
@@ -279,9 +262,17 @@ class TwinConfig:
             "tip_sensor": profile.tip_sensor,
             "max_force_n": max(profile.max_jet_force_n),
             "jet_response": tuple(JetResponse.linear(limit) for limit in profile.max_jet_force_n),
+            "hidden_effects": hidden_effects,
+            "hidden_effect_values": tuple(table.hidden_effect_values.items()),
+            "noise": table.noise,
+            "seed": table.seed,
+            "settle_time_constant_s": table.settle_time_constant_s,
         }
         values.update(changes)
-        return cls(**values)  # type: ignore[arg-type]
+        try:
+            return cls(**values)  # type: ignore[arg-type]
+        except ValueError as error:
+            raise UserError(f"{profile.source}: [twin] {error}") from None
 
     @property
     def effects(self) -> tuple[Effect, ...]:
@@ -296,3 +287,11 @@ class TwinConfig:
         if self.jet_response is not None:
             return self.jet_response
         return (JetResponse.linear(self.max_force_n),) * JET_COUNT
+
+
+def _effect_spec(spec: str, profile: RigProfile) -> str:
+    """An effect file path relative to the profile's folder, made usable from anywhere."""
+    path, colon, name = spec.rpartition(":")
+    if not colon or profile.path is None or path.startswith("/"):
+        return spec
+    return f"{profile.path.parent / path}:{name}"

@@ -44,13 +44,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from drivers.plant import SensorTruth
+from drivers.valve.protocol import DUTY_MAX_PERMILLE
 
 from ..geometry import (matrix_from_quat, quat_conjugate, quat_from_matrix, quat_from_rotvec, quat_multiply,
                         quat_normalize, rotvec_from_quat)
 from ..models import CosseratModel, Solution
-from ..params import ModelParameters, with_parameters
+from ..params import JET_COUNT, ModelParameters, with_parameters
 from ..plans import Plan, PlanStep
-from .config import DUTY_MAX_PERMILLE, JET_COUNT, TwinConfig
+from .config import TwinConfig
 from .recording import TwinRecording
 
 SENSORS = ("base", "tip")

@@ -12,7 +12,6 @@ is "none"; with physics outside the library (docs/examples/water_line_torsion.py
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +19,7 @@ import pytest
 
 from hydrojet_bench.analysis.diagnosis import NONE, UNEXPLAINED, diagnose, estimate_noise_floor, split_session
 from hydrojet_bench.analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
+from hydrojet_bench.config.schema import GravityTable
 from hydrojet_bench.effects import LIBRARY, load_effect
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.plans import calibration_plan, paper_protocol, validation_sweeps
@@ -37,7 +37,7 @@ PLAN = paper_protocol(max_force_n=0.15)
 # that the rod lies horizontal (gravity across it), where its weight bends it even with
 # the jets off.
 RIGS = {"hanging": PROFILE,
-        "horizontal": dataclasses.replace(PROFILE, gravity_in_tracker_m_s2=(9.81, 0.0, 0.0))}
+        "horizontal": PROFILE.with_tables(gravity=GravityTable(in_tracker_m_s2=(9.81, 0.0, 0.0)))}
 # A hanging rod's strain stiffening stays mostly inside what E0, EL, L and w_d absorb:
 # at the top of its range (1.9e-4 to 2e-4 m^2) it left 1.98 to 2.23x the floor over six
 # draws (1.5e-4: 1.77x), not reliably twice, so that case cannot test diagnose (which

@@ -5,16 +5,15 @@ replay of that log."""
 from __future__ import annotations
 
 import asyncio
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+from msgspec.structs import replace
 
 from hydrojet_bench.bench.replay import live_difference_deg, read_session, replay
 from drivers.transport.sim import unregister_device
 from hydrojet_bench.bench.session import Session, SessionAborted, SessionRequest
-from hydrojet_bench.bench.settings import bench_settings
 from hydrojet_bench.model_choice import build_model
 from hydrojet_bench.estimation import OnlineSettings
 from hydrojet_bench.logs import read_log
@@ -31,8 +30,7 @@ WINDOW_S = 0.5
 
 def make_request(log_path: Path, plan=None, **changes) -> SessionRequest:
     profile = load_profile("sim")
-    settings = bench_settings(profile)
-    settings = replace(settings, timing=replace(settings.timing, time_scale=20.0, window_s=WINDOW_S))
+    settings = replace(profile.config, session=replace(profile.config.session, time_scale=20.0, window_s=WINDOW_S))
     model, _ = build_model("cosserat", [])
     plan = plan if plan is not None else (calibration_plan(12, settle_s=SETTLE_S, seed=2)
                                           + validation_sweeps(steps_up=3, repetitions=1, settle_s=SETTLE_S))

@@ -3,7 +3,6 @@ and stop cleanly on Ctrl-C."""
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -16,8 +15,7 @@ from drivers.aurora.client import AuroraTracker
 from drivers.aurora.commands import Command
 from drivers.valve.client import ValveController
 from hydrojet_bench.profile import load_profile
-from hydrojet_bench.twin import DigitalTwin
-from hydrojet_bench.twin.profile_table import twin_config
+from hydrojet_bench.twin import DigitalTwin, TwinConfig
 
 
 def start(device: str, *options: str) -> tuple[subprocess.Popen, str]:
@@ -75,7 +73,7 @@ def read_tip_position_mm(run_async, path: str) -> np.ndarray:
 def test_aurora_emulator_serves_the_sim_profiles_twin_at_rest(run_async):
     # The sim profile hangs the clamp 0.20 m above the tracker origin with its tip sensor
     # 10 mm ahead of the rod tip: the twin's rest pose, not the static default.
-    twin = DigitalTwin(twin_config(load_profile("sim")))
+    twin = DigitalTwin(TwinConfig.from_profile(load_profile("sim")))
     expected_mm = twin.sensor_poses("tip", 0.0)[1] * 1e3
     process, path = start("aurora", "--profile", "sim")
     try:

@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import asyncio
 import json
-from dataclasses import replace
 
 import numpy as np
 import pytest
+from msgspec.structs import replace
 
 from hydrojet_bench.bench.session import Session, SessionRequest
-from hydrojet_bench.bench.settings import bench_settings
 from hydrojet_bench.cli import main
 from hydrojet_bench.model_choice import build_model
 from hydrojet_bench.logs import LogWriter
@@ -28,11 +27,10 @@ def session_log(tmp_path_factory):
     """Six 3 s static poses, then one short sweep per jet in 1 s steps, at 10x."""
     log_path = tmp_path_factory.mktemp("sensors") / "session.mcap"
     profile = load_profile("sim")
-    settings = bench_settings(profile)
-    settings = replace(settings, timing=replace(settings.timing, time_scale=10.0, window_s=0.5),
+    settings = replace(profile.config, session=replace(profile.config.session, time_scale=10.0, window_s=0.5),
                        # Sensors are under test, not the watchdog: a loaded test machine can
                        # stall the loop for seconds, far beyond the firmware's 0.5 s.
-                       valves=replace(settings.valves, watchdog_ms=60_000.0, reply_timeout_ms=5_000.0))
+                       valves=replace(profile.config.valves, watchdog_ms=60_000.0, reply_timeout_ms=5_000.0))
     model, _ = build_model("cosserat", [])
     plan = (calibration_plan(POSES, settle_s=HOLD_S, seed=2)
             + validation_sweeps(steps_up=2, repetitions=1, settle_s=1.0))

@@ -14,9 +14,10 @@ from hydrojet_bench.data import (REQUIRED_COLUMNS, Dataset, SampleFlag, read_csv
                                  saturation_flags, write_csv)
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.inputs import load_dataset
-from hydrojet_bench.profile import RigProfile, load_profile
+from hydrojet_bench.profile import load_profile, profile_from_mapping
 
-PROFILE = RigProfile(name="test", max_jet_force_n=(0.15, 0.15, 0.15))
+PROFILE = profile_from_mapping({"name": "test", "gravity": {"in_tracker_m_s2": [0.0, 0.0, -9.81]},
+                                "jets": {"max_force_n": 0.15}})
 
 # A valid table: two comment lines, the header on line 3, data rows on lines 4-7.
 HEADER = "tip_qw,tip_qx,tip_qy,tip_qz,t,q1,q2,q3,base_qw,base_qx,base_qy,base_qz,base_x,base_y,base_z,sweep"

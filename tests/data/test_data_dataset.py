@@ -8,9 +8,9 @@ import pytest
 from hydrojet_bench.data import Dataset, SampleFlag, average_quaternions, steps_from_runs
 from hydrojet_bench.geometry import (matrix_from_quat, quat_from_rotvec, quat_multiply, rotation_angle_deg,
                                      rotvec_from_quat, se3)
-from hydrojet_bench.profile import RigProfile, SensorMounting
+from hydrojet_bench.profile import profile_from_mapping
 
-PROFILE = RigProfile(name="test")
+PROFILE = profile_from_mapping({"name": "test", "gravity": {"in_tracker_m_s2": [0.0, 0.0, -9.81]}})
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
 
@@ -93,11 +93,13 @@ def random_poses(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarr
 
 def test_frames_undo_the_sensor_mountings() -> None:
     rng = np.random.default_rng(11)
-    profile = RigProfile(
-        gravity_in_tracker_m_s2=(1.0, -9.0, 3.0),
-        base_sensor=SensorMounting(tuple(quat_from_rotvec([0.3, -1.0, 0.2])), (0.012, -0.004, -0.008)),
-        tip_sensor=SensorMounting(tuple(quat_from_rotvec([-0.5, 0.1, 0.9])), (0.001, 0.002, 0.010)),
-    )
+    profile = profile_from_mapping({
+        "gravity": {"in_tracker_m_s2": [1.0, -9.0, 3.0]},
+        "base_sensor": {"rotation_in_base": quat_from_rotvec([0.3, -1.0, 0.2]).tolist(),
+                        "offset_in_base_m": [0.012, -0.004, -0.008]},
+        "tip_sensor": {"rotation_in_tip": quat_from_rotvec([-0.5, 0.1, 0.9]).tolist(),
+                       "offset_in_tip_m": [0.001, 0.002, 0.010]},
+    })
     tips, clamps = random_poses(rng, 25)
     clamp_positions = rng.normal(size=(25, 3)) * 0.1
     poses = profile.sensor_poses_in_tracker(tips, clamps, clamp_positions)

@@ -8,13 +8,13 @@ import asyncio
 import json
 from dataclasses import replace
 
+import msgspec
 import numpy as np
 import pytest
 
 from hydrojet_bench.analysis.metrics import summarise
 from hydrojet_bench.bench.replay import logged_steps, read_session
 from hydrojet_bench.bench.session import Session, SessionRequest
-from hydrojet_bench.bench.settings import bench_settings
 from hydrojet_bench.cli import main
 from hydrojet_bench.model_choice import build_model
 from hydrojet_bench.estimation import OnlineSettings
@@ -110,8 +110,9 @@ def session(tmp_path_factory):
     """A short simulated session (12 calibration poses, one sweep of 5 steps per jet)
     with live calibration and online estimation, and its parameters as a file."""
     folder = tmp_path_factory.mktemp("live")
-    settings = bench_settings(PROFILE)
-    settings = replace(settings, timing=replace(settings.timing, time_scale=20.0, window_s=0.5))
+    settings = PROFILE.config
+    settings = msgspec.structs.replace(settings, session=msgspec.structs.replace(settings.session, time_scale=20.0,
+                                                                                 window_s=0.5))
     model, _ = build_model("cosserat", [])
     plan = calibration_plan(12, settle_s=SETTLE_S, seed=2) + validation_sweeps(steps_up=2, repetitions=1,
                                                                                settle_s=SETTLE_S)

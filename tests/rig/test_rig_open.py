@@ -3,13 +3,11 @@ preparation done before the valves are armed, and the valves closed on every exi
 
 from __future__ import annotations
 
-from dataclasses import replace
-
+import msgspec
 import pytest
 
 from hydrojet_bench.bench.clock import ScaledClock
 from hydrojet_bench.bench.rig import open_rig
-from hydrojet_bench.bench.settings import bench_settings
 from hydrojet_bench.profile import load_profile
 
 
@@ -20,10 +18,10 @@ class Unplugged(Exception):
 @pytest.mark.parametrize("failure", [None, Unplugged])
 def test_open_rig_arms_the_valves_last_and_closes_them_on_exit(run_async, failure):
     profile = load_profile("sim")
-    settings = bench_settings(profile)
+    settings = profile.config
     # The valves are under test, not the watchdog: a loaded machine may stall the loop
     # past the firmware's 0.5 s, which would close the jet for the wrong reason.
-    settings = replace(settings, valves=replace(settings.valves, watchdog_ms=60_000.0))
+    settings = msgspec.structs.replace(settings, valves=msgspec.structs.replace(settings.valves, watchdog_ms=60_000.0))
     sources: list[str] = []
 
     async def before_arming() -> None:

@@ -17,7 +17,6 @@ import pytest
 
 from hydrojet_bench.bench.clock import ScaledClock
 from hydrojet_bench.bench.rig import open_rig
-from hydrojet_bench.bench.settings import bench_settings
 from hydrojet_bench.profile import load_profile
 
 pytestmark = pytest.mark.rig
@@ -26,7 +25,7 @@ pytestmark = pytest.mark.rig
 @contextlib.asynccontextmanager
 async def rig_under_test(profile_spec: str):
     profile = load_profile(profile_spec)
-    async with open_rig(profile, bench_settings(profile), ScaledClock()) as rig:
+    async with open_rig(profile, profile.config, ScaledClock()) as rig:
         yield rig
 
 

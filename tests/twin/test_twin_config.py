@@ -9,7 +9,7 @@ from drivers.valve.calibration import JetCalibration
 from drivers.valve.emulator import ValveEmulator
 from drivers.valve.protocol import Arm, SetAll, encode_message
 from hydrojet_bench.geometry import quat_from_rotvec
-from hydrojet_bench.profile import RigProfile, SensorMounting
+from hydrojet_bench.profile import profile_from_mapping
 from hydrojet_bench.twin import DigitalTwin, JetResponse, SensorNoise, TwinConfig
 
 
@@ -110,7 +110,7 @@ def test_bad_jet_responses_name_their_field(kwargs, message):
 
 
 def test_bad_noise_and_history_limits():
-    with pytest.raises(ValueError, match=r"SensorNoise\.em_position_rms_m must be >= 0"):
+    with pytest.raises(ValueError, match=r"em_position_rms_m must be >= 0"):
         SensorNoise(em_position_rms_m=-1e-3)
     with pytest.raises(ValueError, match="history_limit"):
         DigitalTwin(history_limit=1)
@@ -128,13 +128,14 @@ def test_history_is_bounded_and_old_times_are_refused():
 
 
 def test_config_from_a_rig_profile():
-    profile = RigProfile(
-        name="bench", gravity_in_tracker_m_s2=(9.81, 0.0, 0.0),
-        base_orientation_in_tracker=tuple(quat_from_rotvec([0.0, 1.2, 0.0])),
-        base_position_in_tracker_m=(0.1, 0.2, 0.3),
-        base_sensor=SensorMounting((1.0, 0.0, 0.0, 0.0), (0.0, 0.01, 0.0)),
-        tip_sensor=SensorMounting(tuple(quat_from_rotvec([0.0, 0.0, 0.5])), (0.0, 0.0, 0.014)),
-        max_jet_force_n=(0.1, 0.12, 0.08))
+    profile = profile_from_mapping({
+        "name": "bench", "gravity": {"in_tracker_m_s2": [9.81, 0.0, 0.0]},
+        "base": {"orientation_in_tracker": quat_from_rotvec([0.0, 1.2, 0.0]).tolist(),
+                 "position_in_tracker_m": [0.1, 0.2, 0.3]},
+        "base_sensor": {"offset_in_base_m": [0.0, 0.01, 0.0]},
+        "tip_sensor": {"rotation_in_tip": quat_from_rotvec([0.0, 0.0, 0.5]).tolist(),
+                       "offset_in_tip_m": [0.0, 0.0, 0.014]},
+        "jets": {"max_force_n": [0.1, 0.12, 0.08]}})
     config = TwinConfig.from_profile(profile, seed=4)
     assert config.seed == 4
     assert config.base_sensor == profile.base_sensor and config.tip_sensor == profile.tip_sensor

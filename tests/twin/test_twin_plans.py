@@ -8,7 +8,7 @@ import pytest
 from hydrojet_bench.geometry import matrix_from_quat, quat_from_matrix, quat_from_rotvec, rotation_angle_deg
 from hydrojet_bench.models import CosseratModel
 from hydrojet_bench.plans import Plan, PlanStep, paper_protocol, validation_sweeps
-from hydrojet_bench.profile import RigProfile, SensorMounting
+from hydrojet_bench.profile import profile_from_mapping
 from hydrojet_bench.twin import DigitalTwin, SensorNoise, TwinConfig, TwinRecording
 
 
@@ -124,12 +124,14 @@ def test_recordings_validate_shapes_and_position_pairs():
 
 
 def test_recording_converts_to_a_dataset_that_recovers_the_base_frame_truth():
-    profile = RigProfile(
-        name="twin-test", gravity_in_tracker_m_s2=(0.0, -9.81, 0.0),
-        base_orientation_in_tracker=tuple(quat_from_rotvec([0.9, 0.2, 0.0])),
-        base_position_in_tracker_m=(0.05, 0.0, 0.2),
-        base_sensor=SensorMounting(tuple(quat_from_rotvec([0.0, 0.0, 0.7])), (0.0, 0.01, 0.0)),
-        tip_sensor=SensorMounting(tuple(quat_from_rotvec([0.3, 0.0, 0.0])), (0.0, 0.0, 0.014)))
+    profile = profile_from_mapping({
+        "name": "twin-test", "gravity": {"in_tracker_m_s2": [0.0, -9.81, 0.0]},
+        "base": {"orientation_in_tracker": quat_from_rotvec([0.9, 0.2, 0.0]).tolist(),
+                 "position_in_tracker_m": [0.05, 0.0, 0.2]},
+        "base_sensor": {"rotation_in_base": quat_from_rotvec([0.0, 0.0, 0.7]).tolist(),
+                        "offset_in_base_m": [0.0, 0.01, 0.0]},
+        "tip_sensor": {"rotation_in_tip": quat_from_rotvec([0.3, 0.0, 0.0]).tolist(),
+                       "offset_in_tip_m": [0.0, 0.0, 0.014]}})
     twin = DigitalTwin(TwinConfig.from_profile(profile, noise=SensorNoise.off()))
     plan = Plan((PlanStep((0.06, 0.0, 0.0), -1, 0), PlanStep((0.0, 0.02, 0.07), 0, 0)))
     dataset = twin.run_plan(plan, record_window_s=0.5).to_dataset(profile, source="twin")

@@ -10,7 +10,6 @@ from drivers.valve.protocol import (
     CRC_LEN,
     HEADER_LEN,
     MAX_PAYLOAD,
-    MAX_PAYLOAD,
     SOF,
     Ack,
     AllOff,

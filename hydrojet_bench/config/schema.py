@@ -1,0 +1,400 @@
+"""The rig profile format: one typed tree, one `msgspec.Struct` per TOML table.
+
+This module is the one place the profile format is documented: each field's comment
+gives its unit and meaning, its default is the value written here (or, for the rod,
+capsule and jets, the HydroJet value of `hydrojet_bench.params`). Every table and key is
+optional except ``[gravity] in_tracker_m_s2``; unknown tables and keys are errors.
+`hydrojet_bench.config.loading` reads the TOML, resolves ``extends`` and converts.
+
+::
+
+    extends = "sim"        # optional: a shipped profile's name or a path relative to this
+                           # file; its tables are merged under this file's, key by key
+                           # (lists are replaced whole; the name is never inherited)
+    name = "hydrojet-v1"   # default: the file name without .toml
+    description = "..."
+
+    [gravity] [base] [base_sensor] [tip_sensor] [rod] [capsule] [jets]   # the rig's physics
+    [transports] [tracker] [imu] [valves] [session] [estimator]          # the bench session
+    [twin]                                                               # the simulated rig
+
+Frames (see `hydrojet_bench.profile`): the *tracker frame* the sensors are measured in,
+the *base frame* of the clamp (z along the undeformed rod, base to tip) and the *tip
+frame* at s = L. Quaternions are (w, x, y, z), scalar first, of unit norm within
+`QUATERNION_NORM_TOLERANCE` (a typed-in quaternion with four digits is accepted and
+renormalised).
+
+Checks that involve a field and its table (a quaternion's norm, heartbeat against
+watchdog) raise `ValueError` from ``__post_init__`` with a message that starts with the
+field's name, so that the loader can report the dotted key.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from typing import Annotated
+
+import msgspec
+
+from drivers.imu.calibration import ImuCalibration
+from drivers.valve.calibration import JetCalibration
+from drivers.valve.protocol import DUTY_MAX_PERMILLE
+
+from ..estimation import OnlineSettings
+from ..models import MODELS
+from ..params import JET_COUNT, CapsuleParameters, JetLayout, RodParameters
+
+# Device transports in [transports]: "sim" serves an in-process emulator on the digital
+# twin, "pty" the same emulator on a pseudo-terminal (the serial code path).
+SIM = "sim"
+PTY = "pty"
+
+# Bounding by the largest float refuses inf, and every comparison refuses nan: TOML
+# spells both.
+_LARGEST = sys.float_info.max
+Finite = Annotated[float, msgspec.Meta(ge=-_LARGEST, le=_LARGEST)]
+Positive = Annotated[float, msgspec.Meta(gt=0.0, le=_LARGEST)]
+NonNegative = Annotated[float, msgspec.Meta(ge=0.0, le=_LARGEST)]
+Vector3 = tuple[Finite, Finite, Finite]
+Quaternion = Annotated[tuple[Finite, Finite, Finite, Finite],
+                       msgspec.Meta(description="a unit quaternion [w, x, y, z]")]
+
+IDENTITY_QUATERNION = (1.0, 0.0, 0.0, 0.0)
+ZERO_VECTOR = (0.0, 0.0, 0.0)
+QUATERNION_NORM_TOLERANCE = 1e-3
+
+# The top of `demo`'s sweep, not a measured figure: a real rig states its own.
+DEFAULT_MAX_JET_FORCE_N = 0.15
+
+_ROD = RodParameters()
+_CAPSULE = CapsuleParameters()
+_ONLINE = OnlineSettings()
+_IMU_CALIBRATION = ImuCalibration()
+
+
+class Table(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """Base of every table: immutable, unknown keys refused (subclasses also pass
+    ``kw_only=True``, which is not inherited)."""
+
+
+def check_unit_quaternion(field: str, q: tuple[float, ...] | None) -> None:
+    """Refuse a quaternion whose norm is further from 1 than rounding explains."""
+    if q is None:
+        return
+    norm = math.sqrt(sum(v * v for v in q))
+    if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
+        raise ValueError(f"{field} must be a unit quaternion [w, x, y, z] (norm within "
+                         f"{QUATERNION_NORM_TOLERANCE:g} of 1), got norm {norm:.6g}")
+
+
+# --- the rig's physics ---------------------------------------------------------------
+
+
+class GravityTable(Table, kw_only=True):
+    in_tracker_m_s2: Vector3  # gravitational acceleration in the tracker frame, m/s^2
+
+    def __post_init__(self) -> None:
+        if not math.hypot(*self.in_tracker_m_s2) > 0:
+            raise ValueError("in_tracker_m_s2 must not be zero")
+
+
+class BaseTable(Table, kw_only=True):
+    """The clamp as set up (nominal: with data, the base sensor measures it)."""
+
+    orientation_in_tracker: Quaternion | None = None  # base -> tracker; None: hanging along gravity
+    position_in_tracker_m: Vector3 = ZERO_VECTOR      # clamp origin in the tracker frame, m
+
+    def __post_init__(self) -> None:
+        check_unit_quaternion("orientation_in_tracker", self.orientation_in_tracker)
+
+
+class BaseSensorTable(Table, kw_only=True):
+    rotation_in_base: Quaternion = IDENTITY_QUATERNION  # sensor frame -> base frame
+    offset_in_base_m: Vector3 = ZERO_VECTOR             # sensor origin in the base frame, m
+
+    def __post_init__(self) -> None:
+        check_unit_quaternion("rotation_in_base", self.rotation_in_base)
+
+
+class TipSensorTable(Table, kw_only=True):
+    rotation_in_tip: Quaternion = IDENTITY_QUATERNION  # sensor frame -> tip frame
+    offset_in_tip_m: Vector3 = ZERO_VECTOR             # sensor origin in the tip frame, m
+
+    def __post_init__(self) -> None:
+        check_unit_quaternion("rotation_in_tip", self.rotation_in_tip)
+
+
+class RodTable(Table, kw_only=True):
+    """The soft rod, E linear in arc length from base to tip (`params.RodParameters`)."""
+
+    length_m: Positive = _ROD.length_m              # L, clamp face to tip, m
+    radius_m: Positive = _ROD.radius_m              # solid circular section, m
+    density_kg_m3: Positive = _ROD.density_kg_m3
+    # Thermodynamic bounds of an isotropic solid; 0.5 is incompressible.
+    poisson_ratio: Annotated[float, msgspec.Meta(gt=-1.0, le=0.5)] = _ROD.poisson_ratio
+    youngs_modulus_base_pa: Positive = _ROD.youngs_modulus_base_pa  # E at the clamp, Pa
+    youngs_modulus_tip_pa: Positive = _ROD.youngs_modulus_tip_pa    # E at the tip, Pa
+
+    def parameters(self) -> RodParameters:
+        return RodParameters(**msgspec.structs.asdict(self))
+
+
+class CapsuleTable(Table, kw_only=True):
+    mass_kg: NonNegative = _CAPSULE.mass_kg  # camera, jets and sensor included
+    center_of_mass_in_tip_m: Vector3 = _CAPSULE.center_of_mass_in_tip_m  # tip frame, m
+
+    def parameters(self) -> CapsuleParameters:
+        return CapsuleParameters(self.mass_kg, self.center_of_mass_in_tip_m)
+
+
+class JetsTable(Table, kw_only=True):
+    # Rotation of the jet ring about the tip z axis, deg; 0 is exactly the paper's eq. 5.
+    ring_angle_deg: Finite = math.degrees(JetLayout().ring_angle_rad)
+    # Largest force of each jet, N: one number for all, or one per jet. Commands beyond it
+    # are clipped by the valves.
+    max_force_n: Positive | tuple[Positive, ...] = DEFAULT_MAX_JET_FORCE_N
+
+    def __post_init__(self) -> None:
+        if isinstance(self.max_force_n, tuple) and len(self.max_force_n) != JET_COUNT:
+            raise ValueError(f"max_force_n must be a number or a list of {JET_COUNT} numbers (N), "
+                             f"got {len(self.max_force_n)} numbers")
+
+    def layout(self) -> JetLayout:
+        return JetLayout(ring_angle_rad=math.radians(self.ring_angle_deg))
+
+    @property
+    def max_force_per_jet_n(self) -> tuple[float, ...]:
+        """`max_force_n` for each jet (1, 2, 3), N."""
+        if isinstance(self.max_force_n, tuple):
+            return tuple(float(f) for f in self.max_force_n)
+        return (float(self.max_force_n),) * JET_COUNT
+
+
+# --- the bench session ---------------------------------------------------------------
+
+
+class TransportsTable(Table, kw_only=True):
+    """Where each device is: "sim", "pty", or a transport URL (``serial:///dev/ttyUSB0?
+    baud=115200``, ``pty:///dev/pts/7`` or a bare device path, see drivers/transport)."""
+
+    valves: str = SIM
+    tracker: str = SIM
+    imu_bus: str | int = SIM  # "sim" (emulated ICM-20948 pair) or an I2C bus number (/dev/i2c-N)
+
+    def __post_init__(self) -> None:
+        for name in ("valves", "tracker"):
+            value = getattr(self, name)
+            if not (value in (SIM, PTY) or "://" in value or value.startswith("/")):
+                raise ValueError(f'{name} must be "sim", "pty" or a transport URL (serial:///dev/ttyUSB0, '
+                                 f"pty:///dev/pts/7, /dev/ttyUSB0), got {value!r}")
+        if self.imu_bus != SIM and (isinstance(self.imu_bus, str) or self.imu_bus < 0):
+            raise ValueError(f'imu_bus must be "sim" or an I2C bus number (>= 0), got {self.imu_bus!r}')
+
+    @property
+    def simulated(self) -> bool:
+        """True when any device is emulated (the session then builds a digital twin)."""
+        return SIM in (self.valves, self.tracker, self.imu_bus) or PTY in (self.valves, self.tracker)
+
+
+class TrackerTable(Table, kw_only=True):
+    tools: tuple[str, ...] = ("base", "tip")  # names of the tracker's sensors in port order
+    use_tx: bool = False                      # poll TX (text) frames instead of BX (binary)
+    rate_hz: Positive = 40.0                  # polling rate; the Aurora delivers 40 frames/s
+
+    def __post_init__(self) -> None:
+        if {"base", "tip"} - set(self.tools) or len(set(self.tools)) != len(self.tools):
+            raise ValueError(f'tools must name each of "base" and "tip" once, got {list(self.tools)!r}')
+
+
+class ImuChipTable(Table, kw_only=True):
+    """Magnetometer correction of one chip (`drivers.imu.calibration.ImuCalibration`)."""
+
+    mag_hard_iron_ut: Vector3 = _IMU_CALIBRATION.mag_hard_iron_ut  # subtracted, uT
+    mag_soft_iron: tuple[Vector3, Vector3, Vector3] = _IMU_CALIBRATION.mag_soft_iron  # applied after
+
+    def __post_init__(self) -> None:
+        try:
+            self.calibration()
+        except ValueError as error:
+            raise ValueError(f"mag_soft_iron is not a valid magnetometer correction: {error}") from None
+
+    def calibration(self) -> ImuCalibration:
+        return ImuCalibration(mag_hard_iron_ut=self.mag_hard_iron_ut, mag_soft_iron=self.mag_soft_iron)
+
+
+_ImuAddress = Annotated[int, msgspec.Meta(ge=0x68, le=0x69)]  # ICM-20948: AD0 low or high
+
+
+class ImuTable(Table, kw_only=True):
+    base_address: _ImuAddress = 0x68
+    tip_address: _ImuAddress = 0x69
+    rate_hz: Positive = 40.0               # fusion and logging rate
+    madgwick_gain: Positive = 0.041        # Madgwick filter beta, rad/s
+    use_magnetometer: bool = True
+    gyro_bias_samples: Annotated[int, msgspec.Meta(ge=0)] = 100  # at rest, before the first command
+    base: ImuChipTable = msgspec.field(default_factory=ImuChipTable)  # [imu.base]: the base chip's correction
+    tip: ImuChipTable = msgspec.field(default_factory=ImuChipTable)   # [imu.tip]
+
+    def __post_init__(self) -> None:
+        if self.base_address == self.tip_address:
+            raise ValueError(f"tip_address must differ from imu.base_address (both {self.base_address:#04x})")
+
+
+class JetCalibrationTable(Table, kw_only=True):
+    """One jet's measured curve: force (N) -> valve duty (per mille)."""
+
+    force_n: tuple[float, ...]      # strictly increasing, >= 0, N
+    duty_permille: tuple[int, ...]  # the duty (0..1000) giving each force
+
+    def __post_init__(self) -> None:
+        try:
+            self.calibration()
+        except ValueError as error:
+            raise ValueError(f"force_n is not a valid calibration table: {error}") from None
+
+    def calibration(self) -> JetCalibration:
+        return JetCalibration(self.force_n, self.duty_permille)
+
+
+class ValveCalibrationTable(Table, kw_only=True):
+    """Per jet; a jet without a table gets duty proportional to force up to its
+    ``jets.max_force_n``."""
+
+    jet1: JetCalibrationTable | None = None
+    jet2: JetCalibrationTable | None = None
+    jet3: JetCalibrationTable | None = None
+
+
+class ValvesTable(Table, kw_only=True):
+    watchdog_ms: Positive = 500.0       # the firmware's (and emulator's) silence limit
+    heartbeat_ms: Positive = 100.0      # host PING when idle this long
+    reply_timeout_ms: Positive = 100.0  # per request, before a retry
+    retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 3  # resends of an unanswered request
+    calibration: ValveCalibrationTable = msgspec.field(default_factory=ValveCalibrationTable)
+
+    def __post_init__(self) -> None:
+        if self.heartbeat_ms >= self.watchdog_ms / 2:
+            # A heartbeat slower than half the watchdog trips it on ordinary scheduling jitter.
+            raise ValueError(f"heartbeat_ms must be below half of valves.watchdog_ms ({self.watchdog_ms:g}), "
+                             f"got {self.heartbeat_ms:g}")
+
+    def calibrations(self, jets: JetsTable) -> tuple[JetCalibration, ...]:
+        """One force -> duty table per jet: the measured one, or linear to the jet's limit."""
+        tables = (self.calibration.jet1, self.calibration.jet2, self.calibration.jet3)
+        return tuple(table.calibration() if table is not None
+                     else JetCalibration((0.0, limit), (0, DUTY_MAX_PERMILLE))
+                     for table, limit in zip(tables, jets.max_force_per_jet_n, strict=True))
+
+
+class SessionTable(Table, kw_only=True):
+    settle_s: Positive = 5.0          # hold each command this long, session s (the paper: 5 s)
+    window_s: Positive = 1.0          # average the last window_s of each step, session s
+    time_scale: Positive = 1.0        # session seconds per wall second (> 1 only on the sim rig)
+    flush_interval_s: Positive = 1.0  # log flush period, wall s: what a crash may lose
+
+    def __post_init__(self) -> None:
+        if self.window_s > self.settle_s:
+            raise ValueError(f"window_s must not exceed session.settle_s ({self.settle_s:g} s), got {self.window_s:g}")
+
+
+class EstimatorTable(Table, kw_only=True):
+    model: str = "cosserat"          # a key of `hydrojet_bench.models.MODELS`
+    effects: tuple[str, ...] = ()    # library names or file.py:Class, besides gravity
+    online: bool = True              # live online disturbance estimation after calibration
+    # `OnlineSettings`: the paper's lambda, damping mu (fraction of the largest eigenvalue
+    # of S S^T), model updates per step, and the error (deg) below which iterating stops.
+    gain: Finite = _ONLINE.gain
+    damping: Finite = _ONLINE.damping
+    iterations: int = _ONLINE.iterations
+    tolerance_deg: Finite = _ONLINE.tolerance_deg
+
+    def __post_init__(self) -> None:
+        if self.model not in MODELS:
+            raise ValueError(f"model must be one of {', '.join(MODELS)}, got {self.model!r}")
+        self.online_settings()  # its own ValueError names the estimator key
+
+    def online_settings(self) -> OnlineSettings:
+        return OnlineSettings(self.gain, self.damping, self.iterations, self.tolerance_deg)
+
+
+# --- the simulated rig ---------------------------------------------------------------
+
+
+class SensorNoise(Table, kw_only=True):
+    """Sensor noise of the digital twin and its emulators ([twin.noise]). Totals are RMS
+    over all three axes: each axis gets total / sqrt(3), so the norm of a position error or
+    the angle of an orientation error has the stated RMS.
+
+    em_position_rms_m, em_orientation_rms_deg: EM tracker (NDI Aurora) accuracy, white,
+        per sample; the orientation error is a body-frame rotation of the sensor. The
+        defaults are the paper's (sec. V) figures. Both the twin's EM measurements and
+        the session's Aurora emulator use them.
+    imu_orientation_rms_deg: white orientation noise of an IMU-fused orientation (the
+        twin's own IMU measurements; the byte-level ICM-20948 emulators of a session
+        produce raw samples with their own `drivers.imu.emulator.ImuErrorModel`, and the
+        session fuses them).
+    imu_drift_deg_per_sqrt_s: random-walk drift of each IMU's reference frame (world
+        side): after t seconds the drift angle has RMS ``imu_drift * sqrt(t)``. The IMU
+        defaults are illustrative (a fused ICM-20948 with a magnetometer stays within a
+        few tenths of a degree over the ~20 min protocol), not datasheet figures.
+    """
+
+    em_position_rms_m: NonNegative = 0.48e-3
+    em_orientation_rms_deg: NonNegative = 0.70
+    imu_orientation_rms_deg: NonNegative = 0.3
+    imu_drift_deg_per_sqrt_s: NonNegative = 0.02
+
+    def __post_init__(self) -> None:
+        # Also built in code, where msgspec's constraints do not run.
+        for name in msgspec.structs.fields(self):
+            value = getattr(self, name.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= _LARGEST:
+                raise ValueError(f"{name.name} must be >= 0 and finite, got {value!r}")
+
+    @classmethod
+    def off(cls) -> SensorNoise:
+        """Perfect sensors: measurements equal the truth."""
+        return cls(em_position_rms_m=0.0, em_orientation_rms_deg=0.0, imu_orientation_rms_deg=0.0,
+                   imu_drift_deg_per_sqrt_s=0.0)
+
+
+class TwinTable(Table, kw_only=True):
+    """What the digital twin hides and how it measures (`twin.TwinConfig`)."""
+
+    seed: Annotated[int, msgspec.Meta(ge=0)] = 0  # the twin's and emulators' noise seed
+    # Effects the twin's physics adds to gravity: library names or file.py:Class (relative
+    # to the profile's folder).
+    hidden_effects: tuple[str, ...] = ()
+    settle_time_constant_s: NonNegative = 0.5  # first-order settling to a new equilibrium, s
+    hidden_effect_values: dict[str, Finite] = {}  # "effect.parameter" = value
+    true_parameters: dict[str, Finite] = {}       # flat names: E0, EL, L, wd_fx .. wd_mz
+    noise: SensorNoise = msgspec.field(default_factory=SensorNoise)
+
+
+# --- the whole profile ---------------------------------------------------------------
+
+
+class RigConfig(Table, kw_only=True):
+    """One rig profile, every table typed."""
+
+    name: str = "profile"  # the loader fills in the file name without .toml
+    description: str = ""  # one line for people
+    gravity: GravityTable
+    base: BaseTable = msgspec.field(default_factory=BaseTable)
+    base_sensor: BaseSensorTable = msgspec.field(default_factory=BaseSensorTable)
+    tip_sensor: TipSensorTable = msgspec.field(default_factory=TipSensorTable)
+    rod: RodTable = msgspec.field(default_factory=RodTable)
+    capsule: CapsuleTable = msgspec.field(default_factory=CapsuleTable)
+    jets: JetsTable = msgspec.field(default_factory=JetsTable)
+    transports: TransportsTable = msgspec.field(default_factory=TransportsTable)
+    tracker: TrackerTable = msgspec.field(default_factory=TrackerTable)
+    imu: ImuTable = msgspec.field(default_factory=ImuTable)
+    valves: ValvesTable = msgspec.field(default_factory=ValvesTable)
+    session: SessionTable = msgspec.field(default_factory=SessionTable)
+    estimator: EstimatorTable = msgspec.field(default_factory=EstimatorTable)
+    twin: TwinTable = msgspec.field(default_factory=TwinTable)
+
+    def valve_calibrations(self) -> tuple[JetCalibration, ...]:
+        """The valve client's force -> duty table per jet."""
+        return self.valves.calibrations(self.jets)

@@ -1,0 +1,44 @@
+"""Parameter files (calibrate writes them, compare/run/replay read them): round trip and
+one-line errors naming file and key."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from hydrojet_bench.errors import UserError
+from hydrojet_bench.params import ModelParameters
+from hydrojet_bench.params_io import ParameterFile, read_parameter_file, write_parameter_file
+
+
+def test_a_written_file_reads_back(tmp_path: Path) -> None:
+    written = ParameterFile(model="cosserat", effects=("gravity",),
+                            parameters={"E0": 2.9e5, "gravity.weight_scale": 1.1}, standard_errors={"E0": 1e3},
+                            calibration={"data": "run.csv", "poses": 40})
+    write_parameter_file(tmp_path / "p.toml", written)
+    read = read_parameter_file(tmp_path / "p.toml")
+    assert read == written
+    assert read.apply(ModelParameters()).rod.youngs_modulus_base_pa == 2.9e5
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ('effects = []\n[parameters]\nE0 = 1.0\n', "model is required"),
+    ('model = "cosserat"\n', "parameters is required"),
+    ('model = "cosserat"\n[parameters]\n', "parameters is missing or empty"),
+    ('model = "cosserat"\n[parameters]\nE0 = "stiff"\n', "parameters.E0 must be a finite number, got 'stiff'"),
+    ('model = "cosserat"\n[parameters]\nE0 = nan\n', "parameters.E0 must be a finite number, got nan"),
+    ('model = "cosserat"\neffects = "gravity"\n[parameters]\nE0 = 1.0\n', "effects must be a list of strings"),
+    ('model = "cosserat"\n[parameter]\nE0 = 1.0\n', "parameter is not a known key; did you mean parameters?"),
+])
+def test_mistakes_name_file_and_key(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "p.toml"
+    path.write_text(text)
+    with pytest.raises(UserError) as info:
+        read_parameter_file(path)
+    assert str(info.value).startswith(f"{path}: {message}"), str(info.value)
+
+
+def test_a_missing_file_is_named(tmp_path: Path) -> None:
+    with pytest.raises(UserError, match="no such parameter file"):
+        read_parameter_file(tmp_path / "absent.toml")
