@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 import sys
+from dataclasses import dataclass
 from typing import Annotated
 
 import msgspec
@@ -41,7 +42,6 @@ from drivers.imu.calibration import ImuCalibration
 from drivers.valve.calibration import JetCalibration
 from drivers.valve.protocol import DUTY_MAX_PERMILLE
 
-from ..estimation import OnlineSettings
 from ..models import MODELS
 from ..params import JET_COUNT, CapsuleParameters, JetLayout, RodParameters
 
@@ -64,8 +64,32 @@ IDENTITY_QUATERNION = (1.0, 0.0, 0.0, 0.0)
 ZERO_VECTOR = (0.0, 0.0, 0.0)
 QUATERNION_NORM_TOLERANCE = 1e-3
 
-# The top of `demo`'s sweep, not a measured figure: a real rig states its own.
+# A nominal valve limit for profiles that state none, not a measured figure: a real rig
+# states its own.
 DEFAULT_MAX_JET_FORCE_N = 0.15
+
+@dataclass(frozen=True)
+class OnlineSettings:
+    """gain: the paper's lambda (0.4). damping: mu as a fraction of the largest
+    eigenvalue of S S^T. iterations: model updates per quasistatic step (the paper
+    reports one to two; one per sample in per-sample mode). tolerance_deg: stop
+    iterating once the orientation error is below this (deg)."""
+
+    gain: float = 0.4
+    damping: float = 1e-3
+    iterations: int = 2
+    tolerance_deg: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.gain <= 1.0:
+            raise ValueError(f"estimator.gain must be in (0, 1], got {self.gain}")
+        if not 0.0 <= self.damping < 1.0:
+            raise ValueError(f"estimator.damping must be in [0, 1), got {self.damping}")
+        if self.iterations < 1:
+            raise ValueError(f"estimator.iterations must be >= 1, got {self.iterations}")
+        if not self.tolerance_deg >= 0.0:
+            raise ValueError(f"estimator.tolerance_deg must be >= 0, got {self.tolerance_deg}")
+
 
 _ROD = RodParameters()
 _CAPSULE = CapsuleParameters()

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..config.schema import OnlineSettings
 from ..geometry import matrix_from_quat
 from ..models import kernels
 from ..params import DISTURBANCE_MOMENT_NAMES, PARAMETER_SCALES, ModelParameters, with_parameters
@@ -33,29 +34,6 @@ from ..sensitivity import DEFAULT_RELATIVE_STEP, disturbance_columns
 
 if TYPE_CHECKING:
     from ..models.shooting import ShootingModel, Solution
-
-
-@dataclass(frozen=True)
-class OnlineSettings:
-    """gain: the paper's lambda (0.4). damping: mu as a fraction of the largest
-    eigenvalue of S S^T. iterations: model updates per quasistatic step (the paper
-    reports one to two; one per sample in per-sample mode). tolerance_deg: stop
-    iterating once the orientation error is below this (deg)."""
-
-    gain: float = 0.4
-    damping: float = 1e-3
-    iterations: int = 2
-    tolerance_deg: float = 0.05
-
-    def __post_init__(self) -> None:
-        if not 0.0 < self.gain <= 1.0:
-            raise ValueError(f"estimator.gain must be in (0, 1], got {self.gain}")
-        if not 0.0 <= self.damping < 1.0:
-            raise ValueError(f"estimator.damping must be in [0, 1), got {self.damping}")
-        if self.iterations < 1:
-            raise ValueError(f"estimator.iterations must be >= 1, got {self.iterations}")
-        if not self.tolerance_deg >= 0.0:
-            raise ValueError(f"estimator.tolerance_deg must be >= 0, got {self.tolerance_deg}")
 
 
 @dataclass(frozen=True)

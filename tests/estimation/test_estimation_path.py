@@ -123,7 +123,7 @@ def session(tmp_path_factory):
     params_path = folder / "live.toml"
     calibrated = read_session(request.log_path).parameters[-1]
     assert calibrated.calibrated
-    write_parameter_file(params_path, ParameterFile("cosserat", (), calibrated.values))
+    write_parameter_file(params_path, ParameterFile(model="cosserat", effects=(), parameters=calibrated.values))
     return folder, request.log_path, params_path, result
 
 
