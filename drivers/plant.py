@@ -4,8 +4,8 @@ An emulator never invents motion. It asks a `Plant` where each sensor is and tel
 what the valves are doing. The digital twin implements this interface on the physical
 model; `StaticPlant` holds sensors still, for tests and standalone emulators.
 
-Frames: "world" is the EM tracker's frame. Orientations are unit quaternions
-(w, x, y, z) mapping sensor-frame vectors into the world frame (see
+Frames: "tracker" is the EM tracker's frame, the lab frame of every emulator. Orientations are unit quaternions
+(w, x, y, z) mapping sensor-frame vectors into the tracker frame (see
 `drivers.rotations`).
 """
 
@@ -27,30 +27,30 @@ VALVE_COUNT = 3
 class SensorTruth:
     """Exact state of one sensor at one instant.
 
-    orientation_in_world: unit quaternion (w, x, y, z), sensor frame -> world frame.
-    position_in_world_m: sensor origin in the world frame, metres.
+    orientation_in_tracker: unit quaternion (w, x, y, z), sensor frame -> tracker frame.
+    position_in_tracker_m: sensor origin in the tracker frame, metres.
     angular_velocity_in_sensor_rad_s: body-frame angular rate, rad/s.
-    linear_acceleration_in_world_m_s2: acceleration of the sensor origin (not including
-        gravity), world frame, m/s^2. Zero for quasistatic motion.
+    linear_acceleration_in_tracker_m_s2: acceleration of the sensor origin (not including
+        gravity), tracker frame, m/s^2. Zero for quasistatic motion.
     """
 
-    orientation_in_world: np.ndarray
-    position_in_world_m: np.ndarray
+    orientation_in_tracker: np.ndarray
+    position_in_tracker_m: np.ndarray
     angular_velocity_in_sensor_rad_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    linear_acceleration_in_world_m_s2: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    linear_acceleration_in_tracker_m_s2: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 @runtime_checkable
 class Plant(Protocol):
-    """What every emulator needs from the physical world.
+    """What every emulator needs from the physics (the digital twin, or a fixed pose).
 
-    gravity_in_world_m_s2: gravitational acceleration vector in the world frame (m/s^2),
+    gravity_in_tracker_m_s2: gravitational acceleration vector in the tracker frame (m/s^2),
         e.g. (0, 0, -9.81) when the tracker's z axis points up.
-    magnetic_field_in_world_ut: Earth's field in the world frame, microtesla.
+    magnetic_field_in_tracker_ut: Earth's field in the tracker frame, microtesla.
     """
 
-    gravity_in_world_m_s2: np.ndarray
-    magnetic_field_in_world_ut: np.ndarray
+    gravity_in_tracker_m_s2: np.ndarray
+    magnetic_field_in_tracker_ut: np.ndarray
 
     def sensor_truth(self, sensor: str, t_s: float) -> SensorTruth:
         """Exact pose of sensor ``"base"`` or ``"tip"`` at plant time ``t_s`` (s)."""
@@ -69,8 +69,8 @@ class StaticPlant:
     def __init__(
         self,
         poses: Mapping[str, tuple[Sequence[float], Sequence[float]]] | None = None,
-        gravity_in_world_m_s2: Sequence[float] = (0.0, 0.0, -9.81),
-        magnetic_field_in_world_ut: Sequence[float] = (20.0, 0.0, -45.0),
+        gravity_in_tracker_m_s2: Sequence[float] = (0.0, 0.0, -9.81),
+        magnetic_field_in_tracker_ut: Sequence[float] = (20.0, 0.0, -45.0),
     ) -> None:
         """poses: sensor name -> (orientation (w, x, y, z), position in m). Defaults put the
         base at the origin and the tip 70 mm along -z (the rod hanging straight down)."""
@@ -82,8 +82,8 @@ class StaticPlant:
             name: SensorTruth(quat_normalize(q), np.asarray(p, dtype=float))
             for name, (q, p) in poses.items()
         }
-        self.gravity_in_world_m_s2 = np.asarray(gravity_in_world_m_s2, dtype=float)
-        self.magnetic_field_in_world_ut = np.asarray(magnetic_field_in_world_ut, dtype=float)
+        self.gravity_in_tracker_m_s2 = np.asarray(gravity_in_tracker_m_s2, dtype=float)
+        self.magnetic_field_in_tracker_ut = np.asarray(magnetic_field_in_tracker_ut, dtype=float)
         self._lock = threading.Lock()
         self.valve_history: list[tuple[float, tuple[int, ...]]] = []
 

@@ -8,7 +8,7 @@ validates it; ``profile.model_parameters()`` turns it into `ModelParameters`.
 Frames
 ------
 * *tracker frame*: the frame the sensors are measured in (the EM tracker's, or the
-  world frame of the IMU orientation filter). Dataset orientations and positions live
+  earth frame of the IMU orientation filter). Dataset orientations and positions live
   here.
 * *base frame*: the clamp's frame, z along the undeformed rod from base to tip (the
   frame the models work in, see `hydrojet_bench.params`).

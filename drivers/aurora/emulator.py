@@ -451,10 +451,10 @@ class AuroraEmulator(EmulatorHandler):
         rng = np.random.default_rng([self.seed, port.handle, frame_number])
         position_sigma = self.position_noise_mm / math.sqrt(3.0)
         rotation_sigma = math.radians(self.orientation_noise_deg) / math.sqrt(3.0)
-        position_mm = np.asarray(truth.position_in_world_m, dtype=float) * 1000.0
+        position_mm = np.asarray(truth.position_in_tracker_m, dtype=float) * 1000.0
         position_mm = position_mm + rng.normal(0.0, position_sigma, 3)
         # Body-frame perturbation: the sensor's own orientation error.
-        q = quat_normalize(quat_multiply(truth.orientation_in_world, quat_from_rotvec(rng.normal(0.0, rotation_sigma, 3))))
+        q = quat_normalize(quat_multiply(truth.orientation_in_tracker, quat_from_rotvec(rng.normal(0.0, rotation_sigma, 3))))
         return Transform(
             quaternion=tuple(float(v) for v in q),  # type: ignore[arg-type]
             translation_mm=tuple(float(v) for v in position_mm),  # type: ignore[arg-type]

@@ -1,6 +1,6 @@
 """What the Aurora client hands to the bench: named, timestamped tool poses.
 
-Frames: poses are in the tracker ("world") frame of the field generator; orientation is
+Frames: poses are in the tracker frame of the field generator; orientation is
 a unit quaternion (w, x, y, z) mapping sensor-frame vectors into the tracker frame (the
 convention of `drivers.rotations`), position in millimetres.
 """

@@ -13,11 +13,11 @@ SLV1-3, self-test, digital low-pass filtering.
 
 Data come from the plant's truth at each sample instant (plant time = `clock()`):
 
-    accel = S_a R^T (a_world - g_world) + noise           (specific force, m/s^2)
+    accel = S_a R^T (a_tracker - g_tracker) + noise           (specific force, m/s^2)
     gyro  = S_g omega_sensor + bias + drift + noise        (rad/s)
-    mag   = M_soft R^T (B_world + disturbance) + hard + noise   (uT)
+    mag   = M_soft R^T (B_tracker + disturbance) + hard + noise   (uT)
 
-with R the IMU frame's orientation in the world (the plant sensor's orientation times the
+with R the IMU frame's orientation in the tracker frame (the plant sensor's orientation times the
 optional mounting rotation), S the per-axis scale errors, all noise from one seeded
 generator per chip. Noise is not optional in spirit: `ahrs`' Madgwick returns q
 unchanged for a gyro of exactly zero, so a noiseless emulator would never converge.
@@ -241,15 +241,15 @@ class _EmulatedIcm20948:
     def truth(self, t: float) -> _TruthFrame:
         plant = self.owner.plant
         state = plant.sensor_truth(self.sensor, t)
-        rotation = matrix_from_quat(state.orientation_in_world) @ self.mounting
+        rotation = matrix_from_quat(state.orientation_in_tracker) @ self.mounting
         specific_force = rotation.T @ (
-            np.asarray(state.linear_acceleration_in_world_m_s2, dtype=float) - plant.gravity_in_world_m_s2
+            np.asarray(state.linear_acceleration_in_tracker_m_s2, dtype=float) - plant.gravity_in_tracker_m_s2
         )
         omega = self.mounting.T @ np.asarray(state.angular_velocity_in_sensor_rad_s, dtype=float)
-        field_world = np.asarray(plant.magnetic_field_in_world_ut, dtype=float) + self.owner.magnetic_disturbance(
+        field_in_tracker = np.asarray(plant.magnetic_field_in_tracker_ut, dtype=float) + self.owner.magnetic_disturbance(
             self.sensor
         )
-        return _TruthFrame(specific_force, omega, rotation.T @ field_world)
+        return _TruthFrame(specific_force, omega, rotation.T @ field_in_tracker)
 
     def gyro_bias_rad_s(self) -> np.ndarray:
         return np.asarray(self.model.gyro_bias_rad_s) + self.bias_drift_rad_s
@@ -401,7 +401,7 @@ class Icm20948BusEmulator:
     error_models: sensor name -> ImuErrorModel (default ImuErrorModel()).
     mounting: sensor name -> unit quaternion (w, x, y, z) of the IMU frame in the plant
         sensor frame (default identity: the IMU frame is the plant sensor frame).
-    magnetic_disturbance_ut: sensor name -> extra field at that sensor, world frame (uT).
+    magnetic_disturbance_ut: sensor name -> extra field at that sensor, tracker frame (uT).
     seed: seeds the per-chip noise generators and the fault generator.
     fault_probability: chance that any transaction fails with OSError(EIO).
     who_am_i: address -> WHO_AM_I value, to emulate a different part at an address
@@ -447,11 +447,11 @@ class Icm20948BusEmulator:
 
     # --- test and bench controls --------------------------------------------------------
 
-    def set_magnetic_disturbance(self, sensor: str, field_world_ut: Sequence[float]) -> None:
-        """Add a constant extra field (world frame, uT) at one sensor, e.g. a magnet."""
-        vector = np.asarray(field_world_ut, dtype=float)
+    def set_magnetic_disturbance(self, sensor: str, field_in_tracker_ut: Sequence[float]) -> None:
+        """Add a constant extra field (tracker frame, uT) at one sensor, e.g. a magnet."""
+        vector = np.asarray(field_in_tracker_ut, dtype=float)
         if vector.shape != (3,) or not np.all(np.isfinite(vector)):
-            raise ValueError(f"magnetic disturbance must be three finite numbers, got {field_world_ut!r}")
+            raise ValueError(f"magnetic disturbance must be three finite numbers, got {field_in_tracker_ut!r}")
         with self._lock:
             self._disturbance[sensor] = vector
 

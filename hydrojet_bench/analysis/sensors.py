@@ -1,9 +1,9 @@
 """IMU against EM tracker: how well the cheap IMUs measure the tip relative to the base.
 
 Both sources measure the same two bodies with the same mountings, but in different
-world frames: the EM tracker in its own frame, each Madgwick filter in its earth frame
+reference frames: the EM tracker in its own frame, each Madgwick filter in its earth frame
 (z up, x towards magnetic north). The tip orientation relative to the base, mountings
-removed (`Dataset.tip_orientation_in_base`), does not depend on the world frame, so the
+removed (`Dataset.tip_orientation_in_base`), does not depend on that frame, so the
 two are compared directly.
 
 Alignment: the EM tip-in-base orientation is interpolated to each IMU stamp by slerp

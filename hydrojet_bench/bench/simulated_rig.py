@@ -41,8 +41,8 @@ class SessionPlant:
     def __init__(self, twin: DigitalTwin, clock: Clock) -> None:
         self.twin = twin
         self.clock = clock
-        self.gravity_in_world_m_s2 = twin.gravity_in_world_m_s2
-        self.magnetic_field_in_world_ut = twin.magnetic_field_in_world_ut
+        self.gravity_in_tracker_m_s2 = twin.gravity_in_tracker_m_s2
+        self.magnetic_field_in_tracker_ut = twin.magnetic_field_in_tracker_ut
 
     def sensor_truth(self, sensor: str, t_s: float) -> SensorTruth:
         return self.twin.sensor_truth(sensor, self.clock.now())

@@ -65,8 +65,8 @@ class _ReportingPlant:
 
     def __init__(self, plant) -> None:
         self._plant = plant
-        self.gravity_in_world_m_s2 = plant.gravity_in_world_m_s2
-        self.magnetic_field_in_world_ut = plant.magnetic_field_in_world_ut
+        self.gravity_in_tracker_m_s2 = plant.gravity_in_tracker_m_s2
+        self.magnetic_field_in_tracker_ut = plant.magnetic_field_in_tracker_ut
 
     def sensor_truth(self, sensor: str, t_s: float):
         return self._plant.sensor_truth(sensor, t_s)

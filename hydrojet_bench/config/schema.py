@@ -358,7 +358,7 @@ class SensorNoise(Table, kw_only=True):
         twin's own IMU measurements; the byte-level ICM-20948 emulators of a session
         produce raw samples with their own `drivers.imu.emulator.ImuErrorModel`, and the
         session fuses them).
-    imu_drift_deg_per_sqrt_s: random-walk drift of each IMU's reference frame (world
+    imu_drift_deg_per_sqrt_s: random-walk drift of each IMU's reference frame (tracker
         side): after t seconds the drift angle has RMS ``imu_drift * sqrt(t)``. The IMU
         defaults are illustrative (a fused ICM-20948 with a magnetometer stays within a
         few tenths of a degree over the ~20 min protocol), not datasheet figures.

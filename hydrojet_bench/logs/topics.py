@@ -1,7 +1,7 @@
 """The session log's topics: one record type per topic, and the table `TOPICS`.
 
 Frames: "tracker frame" is the EM field generator's; a sensor frame is the sensor's own;
-"base frame" is the base sensor's; the IMU filter's world frame is its own earth frame.
+"base frame" is the base sensor's; an IMU filter's orientation is in its own earth frame (z up, x to magnetic north).
 Lengths in m, forces in N, moments in N m, angles in deg where a name says ``_deg``.
 A field typed ``... | None`` is null when not measured or not a finite number (JSON
 cannot carry NaN). Fields with a default may be absent from logs of earlier versions.
@@ -58,8 +58,8 @@ class ImuOrientation(LogRecord, kw_only=True):
     """The orientation filter's output."""
 
     topic: ClassVar[str] = "/imu/orientation"
-    base: Annotated[WXYZ, Meta(description="base IMU orientation (w, x, y, z), filter world frame")]
-    tip: Annotated[WXYZ, Meta(description="tip IMU orientation (w, x, y, z), filter world frame")]
+    base: Annotated[WXYZ, Meta(description="base IMU orientation (w, x, y, z), the filter's earth frame")]
+    tip: Annotated[WXYZ, Meta(description="tip IMU orientation (w, x, y, z), the filter's earth frame")]
     tip_in_base: Annotated[WXYZ, Meta(description="tip IMU orientation (w, x, y, z) in the base IMU frame")]
 
 

@@ -8,9 +8,9 @@ naming the field (``TwinConfig.settle_time_constant_s must be ...``).
 
 Frames (see also `hydrojet_bench.params` and `drivers.plant`):
 
-* *world*: the EM tracker's frame, in which the twin reports sensor poses;
+* *tracker*: the EM tracker's frame, in which the twin reports sensor poses;
 * *base frame*: the clamp's frame, z along the undeformed rod towards the tip; its pose
-  in the world is ``base_orientation_in_world`` / ``base_position_in_world_m``;
+  in the tracker frame is ``base_orientation_in_tracker`` / ``base_position_in_tracker_m``;
 * body frames at the clamp (s = 0) and the tip (s = L), as the models return them.
 """
 
@@ -33,7 +33,7 @@ from ..profile import RigProfile, SensorMounting
 
 _TWIN_DEFAULTS = TwinTable()
 # The default rig hangs the rod from its clamp with the tracker's z axis up: the base
-# frame's z (towards the tip) is the world's -z, a half turn about x.
+# frame's z (towards the tip) is the tracker's -z, a half turn about x.
 HANGING_BASE_ORIENTATION = (0.0, 1.0, 0.0, 0.0)
 # A plausible mid-latitude Earth field (uT), the same default as `drivers.plant.StaticPlant`.
 DEFAULT_MAGNETIC_FIELD_UT = (20.0, 0.0, -45.0)
@@ -133,7 +133,7 @@ class TwinConfig:
     """A simulated HydroJet rig.
 
     true_params: the rod's true parameters (the values a calibration should recover).
-        Its ``gravity_in_base_m_s2`` is the truth unless ``gravity_in_world_m_s2`` is given.
+        Its ``gravity_in_base_m_s2`` is the truth unless ``gravity_in_tracker_m_s2`` is given.
     hidden_effects: effects (instances, library names or ``file.py:Class``) the twin's
         physics includes on top of gravity, which a model under evaluation may lack.
         Gravity is always part of the twin (listing it here is allowed, not needed).
@@ -142,12 +142,12 @@ class TwinConfig:
         the effect's default.
     noise: `SensorNoise`; `SensorNoise.off()` for exact measurements.
     seed: seeds the twin's own random generator (noise only; the physics is exact).
-    base_orientation_in_world, base_position_in_world_m: the clamp's pose in the tracker
-        frame (unit quaternion base -> world; m). Default: hanging, tracker z up.
-    gravity_in_world_m_s2: when given, the truth's gravity, mapped into the base frame
-        (replacing ``true_params.gravity_in_base_m_s2``); else gravity in the world
+    base_orientation_in_tracker, base_position_in_tracker_m: the clamp's pose in the tracker
+        frame (unit quaternion base -> tracker; m). Default: hanging, tracker z up.
+    gravity_in_tracker_m_s2: when given, the truth's gravity, mapped into the base frame
+        (replacing ``true_params.gravity_in_base_m_s2``); else gravity in the tracker frame
         follows from the params and the base pose.
-    magnetic_field_in_world_ut: Earth's field for simulated magnetometers, uT.
+    magnetic_field_in_tracker_ut: Earth's field for simulated magnetometers, uT.
     base_sensor, tip_sensor: `hydrojet_bench.profile.SensorMounting`s on the clamp and on
         the rod tip (default: at the body frame's origin with its axes).
     settle_time_constant_s: first-order settling towards a new equilibrium, s (0 jumps).
@@ -161,10 +161,10 @@ class TwinConfig:
     hidden_effect_values: tuple[tuple[str, float], ...] = ()
     noise: SensorNoise = _TWIN_DEFAULTS.noise
     seed: int = _TWIN_DEFAULTS.seed
-    base_orientation_in_world: tuple[float, float, float, float] = HANGING_BASE_ORIENTATION
-    base_position_in_world_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    gravity_in_world_m_s2: tuple[float, float, float] | None = None
-    magnetic_field_in_world_ut: tuple[float, float, float] = DEFAULT_MAGNETIC_FIELD_UT
+    base_orientation_in_tracker: tuple[float, float, float, float] = HANGING_BASE_ORIENTATION
+    base_position_in_tracker_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gravity_in_tracker_m_s2: tuple[float, float, float] | None = None
+    magnetic_field_in_tracker_ut: tuple[float, float, float] = DEFAULT_MAGNETIC_FIELD_UT
     base_sensor: SensorMounting = field(default_factory=SensorMounting)
     tip_sensor: SensorMounting = field(default_factory=SensorMounting)
     settle_time_constant_s: float = _TWIN_DEFAULTS.settle_time_constant_s
@@ -207,15 +207,15 @@ class TwinConfig:
             raise ValueError(f"{owner}.noise must be a SensorNoise, got {type(self.noise).__name__}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise ValueError(f"{owner}.seed must be a non-negative integer, got {self.seed!r}")
-        object.__setattr__(self, "base_orientation_in_world",
-                           _unit_quaternion(owner, "base_orientation_in_world", self.base_orientation_in_world))
-        object.__setattr__(self, "base_position_in_world_m",
-                           _vector(owner, "base_position_in_world_m", self.base_position_in_world_m, 3))
-        if self.gravity_in_world_m_s2 is not None:
-            object.__setattr__(self, "gravity_in_world_m_s2",
-                               _vector(owner, "gravity_in_world_m_s2", self.gravity_in_world_m_s2, 3))
-        object.__setattr__(self, "magnetic_field_in_world_ut",
-                           _vector(owner, "magnetic_field_in_world_ut", self.magnetic_field_in_world_ut, 3))
+        object.__setattr__(self, "base_orientation_in_tracker",
+                           _unit_quaternion(owner, "base_orientation_in_tracker", self.base_orientation_in_tracker))
+        object.__setattr__(self, "base_position_in_tracker_m",
+                           _vector(owner, "base_position_in_tracker_m", self.base_position_in_tracker_m, 3))
+        if self.gravity_in_tracker_m_s2 is not None:
+            object.__setattr__(self, "gravity_in_tracker_m_s2",
+                               _vector(owner, "gravity_in_tracker_m_s2", self.gravity_in_tracker_m_s2, 3))
+        object.__setattr__(self, "magnetic_field_in_tracker_ut",
+                           _vector(owner, "magnetic_field_in_tracker_ut", self.magnetic_field_in_tracker_ut, 3))
         for name in ("base_sensor", "tip_sensor"):
             if not isinstance(getattr(self, name), SensorMounting):
                 raise ValueError(f"{owner}.{name} must be a SensorMounting")
@@ -255,9 +255,9 @@ class TwinConfig:
             raise UserError(f"{profile.source}: twin.hidden_effects: {error}") from None
         values: dict[str, object] = {
             "true_params": true_params,
-            "gravity_in_world_m_s2": profile.gravity_in_tracker_m_s2,
-            "base_orientation_in_world": profile.base_orientation_in_tracker,
-            "base_position_in_world_m": profile.base_position_in_tracker_m,
+            "gravity_in_tracker_m_s2": profile.gravity_in_tracker_m_s2,
+            "base_orientation_in_tracker": profile.base_orientation_in_tracker,
+            "base_position_in_tracker_m": profile.base_position_in_tracker_m,
             "base_sensor": profile.base_sensor,
             "tip_sensor": profile.tip_sensor,
             "max_force_n": max(profile.max_jet_force_n),

@@ -24,8 +24,8 @@ class TwinRecording:
 
     time_s: (n,) sample times, s, non-decreasing (strictly increasing within a plan).
     jet_forces_n: (n, 3) commanded jet forces q1..q3, N.
-    base_orientation, tip_orientation: (n, 4) sensor orientations in the tracker (world)
-        frame, unit quaternions (w, x, y, z), sensor -> world.
+    base_orientation, tip_orientation: (n, 4) sensor orientations in the tracker
+        frame, unit quaternions (w, x, y, z), sensor -> tracker.
     base_position_m, tip_position_m: (n, 3) sensor positions in the tracker frame, m; None
         when the sensors give no positions (IMUs).
     sweep: (n,) plan sweep id, -1 for calibration poses. step: (n,) index within the sweep.

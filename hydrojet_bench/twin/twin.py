@@ -25,8 +25,8 @@ Sensors. Truth (`sensor_truth`, `sensor_poses`) is exact; `measure_em` and `meas
 add the twin's seeded noise (`SensorNoise`). The Aurora emulator adds its own noise to
 `sensor_truth`, so a twin behind emulators is never noisy twice.
 
-A sensor's orientation in the world is R_base_pose R_body M_effect M_mount: the body frame
-(clamp at s = 0 or rod tip at s = L) in the world, then the mounting rotation a hidden
+A sensor's orientation in the tracker frame is R_base_pose R_body M_effect M_mount: the body frame
+(clamp at s = 0 or rod tip at s = L) in the tracker frame, then the mounting rotation a hidden
 effect may add (the `Solution`'s ``*_sensor_mounting``), then the rig's known mounting
 (`TwinConfig.base_sensor`/`tip_sensor`). In that order the rig's known mountings cancel
 exactly from a measured tip-relative-to-base rotation by conjugation, whatever the hidden
@@ -64,9 +64,9 @@ DEFAULT_HISTORY_LIMIT = 4096
 
 @dataclass(frozen=True)
 class SensorMeasurement:
-    """Poses of both sensors at ``time_s`` (scalar or (n,)), world (tracker) frame.
+    """Poses of both sensors at ``time_s`` (scalar or (n,)), tracker frame.
 
-    *_orientation: unit quaternions (w, x, y, z), sensor -> world, shape (..., 4).
+    *_orientation: unit quaternions (w, x, y, z), sensor -> tracker, shape (..., 4).
     *_position_m: sensor origins, m, shape (..., 3); None for IMU measurements.
     """
 
@@ -85,7 +85,7 @@ class _Segment:
     start_s: float
     jet_forces_n: np.ndarray
     solution: Solution
-    target_orientation: np.ndarray  # (2, 4) sensor -> world at equilibrium
+    target_orientation: np.ndarray  # (2, 4) sensor -> tracker at equilibrium
     target_position_m: np.ndarray  # (2, 3)
     rotation_offset_rad: np.ndarray  # (2, 3) phi = log(R_eq^T R_start), sensor frame
     position_offset_m: np.ndarray  # (2, 3) p_start - p_eq
@@ -108,8 +108,8 @@ class DigitalTwin:
     call it from their own threads.
 
     Attributes: ``config``; ``true_params`` (the truth, hidden-effect values and gravity
-    merged in); ``model`` (the twin's private `CosseratModel`); ``gravity_in_world_m_s2``
-    and ``magnetic_field_in_world_ut`` (the `Plant` attributes).
+    merged in); ``model`` (the twin's private `CosseratModel`); ``gravity_in_tracker_m_s2``
+    and ``magnetic_field_in_tracker_ut`` (the `Plant` attributes).
     """
 
     def __init__(self, config: TwinConfig | None = None, history_limit: int = DEFAULT_HISTORY_LIMIT) -> None:
@@ -120,20 +120,20 @@ class DigitalTwin:
             raise ValueError(f"history_limit must be an integer >= 2, got {history_limit!r}")
         self._history_limit = history_limit
         cfg = self.config
-        self._base_rotation = matrix_from_quat(cfg.base_orientation_in_world)
-        self._base_position_m = np.array(cfg.base_position_in_world_m)
+        self._base_rotation = matrix_from_quat(cfg.base_orientation_in_tracker)
+        self._base_position_m = np.array(cfg.base_position_in_tracker_m)
         params = cfg.true_params
-        if cfg.gravity_in_world_m_s2 is not None:
+        if cfg.gravity_in_tracker_m_s2 is not None:
             params = replace(params, gravity_in_base_m_s2=tuple(
-                self._base_rotation.T @ np.array(cfg.gravity_in_world_m_s2)))
+                self._base_rotation.T @ np.array(cfg.gravity_in_tracker_m_s2)))
         if cfg.hidden_effect_values:
             params = with_parameters(params, dict(cfg.hidden_effect_values))
         # A fresh object even when nothing changed: models cache packed problems by the
         # identity of their params, and the truth must never alias a caller's object.
         self.true_params: ModelParameters = replace(params)
         self.model = CosseratModel(effects=cfg.effects, resolution=cfg.resolution)
-        self.gravity_in_world_m_s2 = self._base_rotation @ np.array(self.true_params.gravity_in_base_m_s2)
-        self.magnetic_field_in_world_ut = np.array(cfg.magnetic_field_in_world_ut)
+        self.gravity_in_tracker_m_s2 = self._base_rotation @ np.array(self.true_params.gravity_in_base_m_s2)
+        self.magnetic_field_in_tracker_ut = np.array(cfg.magnetic_field_in_tracker_ut)
         self._mount_rotation = np.stack([matrix_from_quat(cfg.base_sensor.rotation_in_body),
                                          matrix_from_quat(cfg.tip_sensor.rotation_in_body)])
         self._mount_offset_m = np.array([cfg.base_sensor.offset_in_body_m, cfg.tip_sensor.offset_in_body_m])
@@ -233,7 +233,7 @@ class DigitalTwin:
             return self._segment_at(float(t_s)).solution
 
     def sensor_poses(self, sensor: str, t_s: float | Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Exact orientation (w, x, y, z; sensor -> world) and position (m, world) of
+        """Exact orientation (w, x, y, z; sensor -> tracker) and position (m, tracker frame) of
         sensor ``"base"`` or ``"tip"`` at time(s) ``t_s``; vectorised over a 1-D array."""
         index = self._sensor_index(sensor)
         times = _as_times(t_s)
@@ -242,7 +242,7 @@ class DigitalTwin:
 
     def sensor_truth(self, sensor: str, t_s: float) -> SensorTruth:
         """`Plant` hook: exact state of sensor ``"base"`` or ``"tip"`` at ``t_s``, with the
-        settling law's angular velocity (sensor frame) and linear acceleration (world)."""
+        settling law's angular velocity (sensor frame) and linear acceleration (tracker frame)."""
         index = self._sensor_index(sensor)
         t = float(t_s)
         if not math.isfinite(t):
@@ -282,7 +282,7 @@ class DigitalTwin:
     def measure_imu(self, t_s: float | Sequence[float] | np.ndarray) -> SensorMeasurement:
         """IMU-fused orientations of both sensors at time(s) ``t_s``, non-decreasing and not
         before the previous call's last time (the drift is a random walk in time):
-        R_meas = exp(d(t)) R_true exp(n), d a per-IMU world-side random walk of the drift
+        R_meas = exp(d(t)) R_true exp(n), d a per-IMU tracker-side random walk of the drift
         rotation vector, n white body-frame noise. No positions (IMUs give none)."""
         times = _as_times(t_s)
         flat = times.reshape(-1)

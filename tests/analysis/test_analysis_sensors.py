@@ -249,7 +249,7 @@ def test_online_estimation_fed_by_imus_in_another_frame_equals_em_fed():
                                     imu.quasistatic_steps())
     assert len(comparison.steps) == 3 * 5  # the sweeps' steps only
     em_fed, imu_fed = (comparison.results[k].orientation_error_deg for k in ("online_em", "online_imu"))
-    # Same measurements in another world frame: only rounding differs.
+    # Same measurements in another earth frame: only rounding differs.
     np.testing.assert_allclose(imu_fed, em_fed, atol=1e-5)
     ref = comparison.results["ref"].overall.orientation_rmse_deg
     assert comparison.gain("online_imu") == pytest.approx(1 - comparison.results["online_imu"].overall

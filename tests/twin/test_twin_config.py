@@ -69,8 +69,8 @@ def test_the_valve_emulator_drives_the_twin():
     np.testing.assert_allclose(twin.jet_forces_n, (0.08, 0.0, 0.0))
     assert twin.last_command_s == 10.25
     # The rod bends away over the following seconds.
-    rest = twin.sensor_truth("tip", 10.25).position_in_world_m
-    bent = twin.sensor_truth("tip", 20.0).position_in_world_m
+    rest = twin.sensor_truth("tip", 10.25).position_in_tracker_m
+    bent = twin.sensor_truth("tip", 20.0).position_in_tracker_m
     assert np.linalg.norm(bent - rest) > 0.02
 
 
@@ -81,9 +81,9 @@ def test_the_valve_emulator_drives_the_twin():
     ({"hidden_effects": (object(),)}, "is not an Effect"),
     ({"hidden_effects": "gravity"}, "must be a sequence"),
     ({"seed": -3}, "seed"),
-    ({"base_orientation_in_world": (1.0, 1.0, 0.0, 0.0)}, "base_orientation_in_world must be a unit quaternion"),
-    ({"base_position_in_world_m": (0.0, float("nan"), 0.0)}, r"base_position_in_world_m\[1\] must be finite"),
-    ({"gravity_in_world_m_s2": (0.0, -9.81)}, "gravity_in_world_m_s2 must have 3"),
+    ({"base_orientation_in_tracker": (1.0, 1.0, 0.0, 0.0)}, "base_orientation_in_tracker must be a unit quaternion"),
+    ({"base_position_in_tracker_m": (0.0, float("nan"), 0.0)}, r"base_position_in_tracker_m\[1\] must be finite"),
+    ({"gravity_in_tracker_m_s2": (0.0, -9.81)}, "gravity_in_tracker_m_s2 must have 3"),
     ({"settle_time_constant_s": -0.1}, "settle_time_constant_s must be >= 0"),
     ({"max_force_n": 0.0}, "max_force_n must be > 0"),
     ({"jet_response": (JetResponse.linear(0.1),)}, "jet_response must be 3"),
@@ -139,9 +139,9 @@ def test_config_from_a_rig_profile():
     config = TwinConfig.from_profile(profile, seed=4)
     assert config.seed == 4
     assert config.base_sensor == profile.base_sensor and config.tip_sensor == profile.tip_sensor
-    assert config.base_position_in_world_m == (0.1, 0.2, 0.3)
+    assert config.base_position_in_tracker_m == (0.1, 0.2, 0.3)
     twin = DigitalTwin(config)
-    np.testing.assert_allclose(twin.gravity_in_world_m_s2, (9.81, 0.0, 0.0), atol=1e-12)
+    np.testing.assert_allclose(twin.gravity_in_tracker_m_s2, (9.81, 0.0, 0.0), atol=1e-12)
     np.testing.assert_allclose(twin.true_params.gravity_in_base_m_s2, profile.gravity_in_base_m_s2(), atol=1e-12)
     np.testing.assert_allclose(twin.duties_to_forces((1000, 1000, 1000)), (0.1, 0.12, 0.08))
     assert twin.true_params.rod == profile.rod

@@ -58,14 +58,14 @@ def test_imu_white_noise_rms():
     assert math.sqrt(np.mean(angle**2)) == pytest.approx(0.4, rel=0.03)
 
 
-def test_imu_drift_is_a_world_side_random_walk():
+def test_imu_drift_is_a_tracker_side_random_walk():
     drift = 0.05  # deg / sqrt(s)
     twin = bent_twin(SensorNoise(imu_orientation_rms_deg=0.0, imu_drift_deg_per_sqrt_s=drift))
     dt = 0.1
     times = 10.0 + dt * np.arange(SAMPLES)
     measured = twin.measure_imu(times)
     true_q = twin.sensor_poses("base", times)[0]
-    # World-side: q_meas = d q_true, so q_meas conj(q_true) is the drift itself.
+    # Tracker-side: q_meas = d q_true, so q_meas conj(q_true) is the drift itself.
     walk = quat_multiply(measured.base_orientation, quat_conjugate(true_q))
     steps = rotation_angle_deg(walk[1:], walk[:-1])
     assert math.sqrt(np.mean(steps**2)) == pytest.approx(drift * math.sqrt(dt), rel=0.03)

@@ -63,14 +63,14 @@ class TiltedTipSensor:
 
 
 def quiet_twin(**changes) -> DigitalTwin:
-    values = dict(true_params=TRUE, noise=SensorNoise.off(), base_orientation_in_world=BASE_Q,
-                  base_position_in_world_m=BASE_P)
+    values = dict(true_params=TRUE, noise=SensorNoise.off(), base_orientation_in_tracker=BASE_Q,
+                  base_position_in_tracker_m=BASE_P)
     values.update(changes)
     return DigitalTwin(TwinConfig(**values))
 
 
-def world_pose(solution, node: int, mounting: np.ndarray = np.eye(3), offset=np.zeros(3)):
-    """Independent composition: base pose in world, body frame, mountings."""
+def tracker_pose(solution, node: int, mounting: np.ndarray = np.eye(3), offset=np.zeros(3)):
+    """Independent composition: base pose in the tracker frame, body frame, mountings."""
     r_base = matrix_from_quat(BASE_Q)
     rotation = r_base @ solution.rotations_in_base[node] @ mounting
     body_position = solution.positions_in_base_m[node] + solution.rotations_in_base[node] @ offset
@@ -85,7 +85,7 @@ def test_settled_truth_is_the_cosserat_equilibrium_at_the_true_parameters(forces
     expected = CosseratModel(effects=("gravity",)).solve(forces, TRUE)
     for sensor, node in (("base", 0), ("tip", -1)):
         q, p = twin.sensor_poses(sensor, 1000.0)
-        q_expected, p_expected = world_pose(expected, node)
+        q_expected, p_expected = tracker_pose(expected, node)
         assert rotation_angle_deg(q, q_expected) < 1e-6
         np.testing.assert_allclose(p, p_expected, atol=1e-10)
     base_q, _ = twin.sensor_poses("base", 1000.0)
@@ -94,17 +94,17 @@ def test_settled_truth_is_the_cosserat_equilibrium_at_the_true_parameters(forces
     assert rotation_angle_deg(relative, expected.tip_sensor_quaternion()) < 1e-6
 
 
-def test_gravity_in_world_follows_the_base_pose_or_overrides_the_params():
+def test_gravity_in_tracker_follows_the_base_pose_or_overrides_the_params():
     twin = quiet_twin()
-    np.testing.assert_allclose(twin.gravity_in_world_m_s2,
+    np.testing.assert_allclose(twin.gravity_in_tracker_m_s2,
                                matrix_from_quat(BASE_Q) @ np.array(TRUE.gravity_in_base_m_s2))
-    across = quiet_twin(gravity_in_world_m_s2=(0.0, 0.0, -9.81))
-    np.testing.assert_allclose(across.gravity_in_world_m_s2, (0.0, 0.0, -9.81), atol=1e-12)
+    across = quiet_twin(gravity_in_tracker_m_s2=(0.0, 0.0, -9.81))
+    np.testing.assert_allclose(across.gravity_in_tracker_m_s2, (0.0, 0.0, -9.81), atol=1e-12)
     np.testing.assert_allclose(across.true_params.gravity_in_base_m_s2,
                                matrix_from_quat(BASE_Q).T @ np.array([0.0, 0.0, -9.81]), atol=1e-12)
     # The default rig hangs: the rest tip is 68 mm straight below the clamp.
     hanging = DigitalTwin(TwinConfig(true_params=TRUE, noise=SensorNoise.off()))
-    np.testing.assert_allclose(hanging.gravity_in_world_m_s2, (0.0, 0.0, -9.81), atol=1e-12)
+    np.testing.assert_allclose(hanging.gravity_in_tracker_m_s2, (0.0, 0.0, -9.81), atol=1e-12)
     np.testing.assert_allclose(hanging.sensor_poses("tip", 0.0)[1], (0.0, 0.0, -0.068), atol=1e-12)
 
 
@@ -116,7 +116,7 @@ def test_mountings_rotate_and_offset_the_sensors_and_cancel_from_the_relative_ro
     expected = CosseratModel().solve((0.0, 0.05, 0.0), TRUE)
     for sensor, node, mount in (("base", 0, base_mount), ("tip", -1, tip_mount)):
         q, p = twin.sensor_poses(sensor, 60.0)
-        q_expected, p_expected = world_pose(expected, node, matrix_from_quat(mount.rotation_in_body),
+        q_expected, p_expected = tracker_pose(expected, node, matrix_from_quat(mount.rotation_in_body),
                                             np.array(mount.offset_in_body_m))
         assert rotation_angle_deg(q, q_expected) < 1e-6
         np.testing.assert_allclose(p, p_expected, atol=1e-10)
@@ -237,11 +237,11 @@ def test_sensor_truth_rates_are_the_derivatives_of_the_settling_motion():
         assert isinstance(truth, SensorTruth)
         q_minus, p_minus = twin.sensor_poses(sensor, t - h)
         q_plus, p_plus = twin.sensor_poses(sensor, t + h)
-        np.testing.assert_allclose(truth.orientation_in_world, twin.sensor_poses(sensor, t)[0], atol=1e-15)
+        np.testing.assert_allclose(truth.orientation_in_tracker, twin.sensor_poses(sensor, t)[0], atol=1e-15)
         omega = rotvec_from_quat(quat_multiply(quat_conjugate(q_minus), q_plus)) / (2 * h)
         np.testing.assert_allclose(truth.angular_velocity_in_sensor_rad_s, omega, atol=1e-6)
-        acceleration = (p_plus - 2 * truth.position_in_world_m + p_minus) / h**2
-        np.testing.assert_allclose(truth.linear_acceleration_in_world_m_s2, acceleration, atol=2e-4)
+        acceleration = (p_plus - 2 * truth.position_in_tracker_m + p_minus) / h**2
+        np.testing.assert_allclose(truth.linear_acceleration_in_tracker_m_s2, acceleration, atol=2e-4)
     assert np.linalg.norm(twin.sensor_truth("tip", t).angular_velocity_in_sensor_rad_s) > 0.1
 
 
@@ -251,7 +251,7 @@ def test_the_twin_is_a_plant():
     with pytest.raises(KeyError, match="no sensor 'middle'"):
         twin.sensor_truth("middle", 0.0)
     truth = twin.sensor_truth("base", 0.0)
-    assert truth.orientation_in_world.shape == (4,) and truth.position_in_world_m.shape == (3,)
+    assert truth.orientation_in_tracker.shape == (4,) and truth.position_in_tracker_m.shape == (3,)
 
 
 def test_equilibrium_reports_the_solution_being_approached():

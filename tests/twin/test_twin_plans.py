@@ -35,7 +35,7 @@ def test_paper_protocol_recording_has_every_sample_labelled(protocol_run):
 def test_settled_samples_are_the_true_equilibria(protocol_run):
     plan, twin, recording = protocol_run
     model = CosseratModel()
-    base_rotation = matrix_from_quat(twin.config.base_orientation_in_world)
+    base_rotation = matrix_from_quat(twin.config.base_orientation_in_tracker)
     last_of_step = np.arange(1, len(plan) + 1) * 200 - 1
     previous = None
     worst_deg, worst_m = 0.0, 0.0

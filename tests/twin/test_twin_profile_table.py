@@ -95,9 +95,9 @@ def test_twin_noise_reaches_the_emulated_tracker(tmp_path, run_async, noise_off)
                 return frame, truth
 
     frame, truth = run_async(read_tip, timeout_s=30.0)
-    error_mm = np.linalg.norm(np.subtract(frame.position_mm, truth.position_in_world_m * 1e3))
+    error_mm = np.linalg.norm(np.subtract(frame.position_mm, truth.position_in_tracker_m * 1e3))
     if noise_off:
         assert error_mm < 1e-3  # float32 frame resolution
-        np.testing.assert_allclose(np.abs(np.dot(frame.orientation, truth.orientation_in_world)), 1.0, atol=1e-6)
+        np.testing.assert_allclose(np.abs(np.dot(frame.orientation, truth.orientation_in_tracker)), 1.0, atol=1e-6)
     else:
         assert error_mm > 0.05  # 2 mm RMS from the profile, not the emulator's own 0.48 mm default

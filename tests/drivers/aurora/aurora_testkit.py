@@ -37,7 +37,7 @@ def make_plant() -> StaticPlant:
 def truth_mm(plant: StaticPlant, sensor: str) -> tuple[np.ndarray, np.ndarray]:
     """(quaternion, position in mm) of a plant sensor."""
     truth = plant.sensor_truth(sensor, 0.0)
-    return truth.orientation_in_world, truth.position_in_world_m * 1000.0
+    return truth.orientation_in_tracker, truth.position_in_tracker_m * 1000.0
 
 
 def talk(emulator: AuroraEmulator, text: str):

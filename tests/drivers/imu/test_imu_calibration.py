@@ -86,9 +86,9 @@ quaternions = st.tuples(*[st.floats(-1.0, 1.0)] * 4).filter(lambda q: np.linalg.
 def test_gravity_and_field_give_back_the_orientation(q_tuple: tuple[float, ...]) -> None:
     q = np.asarray(q_tuple) / np.linalg.norm(q_tuple)
     rotation = matrix_from_quat(q)
-    field_world = np.array([20.0, 0.0, -45.0])  # horizontal part along +x: Madgwick's frame
+    field_in_tracker = np.array([20.0, 0.0, -45.0])  # horizontal part along +x: Madgwick's frame
     accel = rotation.T @ np.array([0.0, 0.0, 9.81])
-    mag = rotation.T @ field_world
+    mag = rotation.T @ field_in_tracker
     # (arccos of a dot product near 1 limits the resolution to ~1e-6 deg)
     assert rotation_angle_deg(orientation_from_gravity_and_field(accel, mag), q) < 1e-4
 

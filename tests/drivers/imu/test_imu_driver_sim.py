@@ -31,7 +31,7 @@ from drivers.imu import (
 from drivers.plant import SensorTruth, StaticPlant
 from hydrojet_bench.geometry import matrix_from_quat, quat_from_rotvec, quat_multiply, rotation_angle_deg
 
-FIELD_WORLD_UT = np.array([20.0, 0.0, -45.0])
+FIELD_IN_TRACKER_UT = np.array([20.0, 0.0, -45.0])
 
 
 def rig(
@@ -54,8 +54,8 @@ class WobblingPlant:
     """Base still; tip still until start_s, then swinging +-0.2 rad about the axis
     (tip frame) at 2 Hz about a 20 degree tilt."""
 
-    gravity_in_world_m_s2 = np.array([0.0, 0.0, -9.81])
-    magnetic_field_in_world_ut = FIELD_WORLD_UT
+    gravity_in_tracker_m_s2 = np.array([0.0, 0.0, -9.81])
+    magnetic_field_in_tracker_ut = FIELD_IN_TRACKER_UT
 
     def __init__(self, start_s: float = 0.0, axis: Sequence[float] = (1.0, 0.0, 0.0)) -> None:
         self.start_s = start_s
@@ -86,11 +86,11 @@ def test_both_chips_start_and_report_physical_values() -> None:
     clock.sleep(0.05)
     b, t = base.read_raw(), tip.read_raw()
     assert b.accel_m_s2 == pytest.approx((0.0, 0.0, 9.81), abs=0.1)
-    # tip rotated +90 deg about x: world up (+z) is the tip's +y... R^T (0,0,g)
+    # tip rotated +90 deg about x: tracker up (+z) is the tip's +y... R^T (0,0,g)
     assert t.accel_m_s2 == pytest.approx((0.0, 9.81, 0.0), abs=0.1)
-    expected_tip_field = matrix_from_quat(q_tip).T @ FIELD_WORLD_UT
+    expected_tip_field = matrix_from_quat(q_tip).T @ FIELD_IN_TRACKER_UT
     assert t.mag_ut == pytest.approx(tuple(expected_tip_field), abs=2.0)
-    assert b.mag_ut == pytest.approx(tuple(FIELD_WORLD_UT), abs=2.0)
+    assert b.mag_ut == pytest.approx(tuple(FIELD_IN_TRACKER_UT), abs=2.0)
     assert b.temperature_degc == pytest.approx(30.0, abs=0.01)
     assert emulator.gyro_bias_rad_s("base") == pytest.approx(b.gyro_rad_s, abs=0.01)
 
@@ -178,7 +178,7 @@ def test_hard_and_soft_iron_correction_recovers_the_field() -> None:
     _, clock, driver = rig(tilted_plant((1, 0, 0, 0), q_tip), error_models=models, seed=3)
     tip = driver(0x69)
     tip.initialize()
-    truth = matrix_from_quat(q_tip).T @ FIELD_WORLD_UT
+    truth = matrix_from_quat(q_tip).T @ FIELD_IN_TRACKER_UT
 
     def mean_field() -> np.ndarray:
         values = []
@@ -233,8 +233,8 @@ def test_fused_tip_relative_to_base_matches_the_truth(base_rotvec: tuple, tip_ro
     truth = quat_multiply(np.asarray(q_base) * [1, -1, -1, -1], q_tip)
     q_rel, fusion = run_fusion(tilted_plant(q_base, q_tip), seconds=3.0)
     assert rotation_angle_deg(q_rel, truth) < 2.0
-    # each absolute orientation too: Madgwick's earth frame is the world frame here,
-    # because the world field's horizontal part points along +x
+    # each absolute orientation too: Madgwick's earth frame is the tracker frame here,
+    # because the tracker field's horizontal part points along +x
     assert rotation_angle_deg(fusion.base.quaternion, q_base) < 2.0
     assert rotation_angle_deg(fusion.tip.quaternion, q_tip) < 2.0
 
@@ -256,7 +256,7 @@ def test_fused_orientation_tracks_a_swinging_tip(axis: tuple[float, float, float
     while clock() < plant.start_s + 2.0:
         clock.sleep(base.sample_period_s)
         q_rel = fusion.update(base.read_sample(), tip.read_sample())
-        errors.append(rotation_angle_deg(q_rel, plant.sensor_truth("tip", clock()).orientation_in_world))
+        errors.append(rotation_angle_deg(q_rel, plant.sensor_truth("tip", clock()).orientation_in_tracker))
     assert max(errors) < 3.0
 
 
