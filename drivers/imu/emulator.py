@@ -329,15 +329,15 @@ class _EmulatedIcm20948:
         if gyro_due is not None:
             walk = m.gyro_bias_random_walk_rad_s_per_sqrt_s * math.sqrt(gyro_due[1] * self.period_s)
             self.bias_drift_rad_s = self.bias_drift_rad_s + self.rng.normal(0.0, walk, 3)
-        frames: dict[float, _TruthFrame] = {}
         accel = gyro = np.zeros(3)
-        if accel_due is not None:
-            frame = frames.setdefault(accel_due[0], self.truth(accel_due[0]))
-            accel = (1.0 + np.asarray(m.accel_scale_error)) * frame.specific_force_m_s2 + self.rng.normal(
+        accel_frame = None if accel_due is None else self.truth(accel_due[0])
+        if accel_frame is not None:
+            accel = (1.0 + np.asarray(m.accel_scale_error)) * accel_frame.specific_force_m_s2 + self.rng.normal(
                 0.0, accel_noise, 3
             )
         if gyro_due is not None:
-            frame = frames[gyro_due[0]] if gyro_due[0] in frames else self.truth(gyro_due[0])
+            same_instant = accel_frame is not None and accel_due is not None and accel_due[0] == gyro_due[0]
+            frame = accel_frame if same_instant else self.truth(gyro_due[0])
             gyro = (
                 (1.0 + np.asarray(m.gyro_scale_error)) * frame.angular_velocity_rad_s
                 + self.gyro_bias_rad_s()
