@@ -80,3 +80,16 @@ def test_magnetic_disturbances_do_not_leak_into_the_default_filters_tilt() -> No
         assert default.heading_max_deg < 2.0, default
     (madgwick,) = score(short, ["madgwick"])
     assert madgwick.tilt_leak_deg is not None and madgwick.tilt_leak_deg > 2.0, madgwick
+
+
+def test_default_filter_recovers_from_a_large_error_at_the_simulated_rigs_10_hz() -> None:
+    """A fast move sampled at 10 Hz can leave the estimate far off gravity; the filter must
+    then still listen to the accelerometer (imufusion's acceleration rejection would
+    ignore it for its whole 20 s timeout: docs/imu-fusion.md)."""
+    truth = quat_from_rotvec([0.2, 0.1, 0.4])
+    samples = held_samples(truth, 121, rate_hz=10.0)
+    filter_ = ImuOrientationFilter(10.0)
+    filter_._core.seed(quat_multiply(quat_from_rotvec([0.7, 0.0, 0.0]), filter_.update(samples[0])))  # 40 deg off
+    for sample in samples[1:]:
+        estimate = filter_.update(sample)
+    assert rotation_angle_deg(estimate, truth) < 2.0
