@@ -31,6 +31,7 @@ def test_perf_writes_json_with_every_figure_and_its_target(tmp_path):
     comparison = figures["solve_bvp_comparison"]
     assert comparison["tip_difference_mm"] < 0.01  # accuracy, not speed: deterministic
     assert comparison["speedup_warm"] > 0
+    assert figures["imu_fusion"]["update_us"] > 0 and figures["imu_fusion"]["target_us"] == 10.0
 
 
 def test_user_mistakes_are_one_line_without_traceback(tmp_path):

@@ -4,8 +4,9 @@ magnetometer read through the chip's auxiliary I2C master.
 Layers: `registers` (datasheet register map), `codec` (one burst <-> `RawImuSample`,
 SI units), `driver` (`Icm20948`, synchronous register-level start-up and sampling over
 any `smbus2.SMBus`-like object), `async_driver` (worker thread + timeout for the bench),
-`calibration` (gyro bias, hard/soft iron), `fusion` (Madgwick orientation and the
-tip-relative-to-base rotation) and `emulator` (`Icm20948BusEmulator`, an SMBus stand-in
+`calibration` (gyro bias, hard/soft iron), `fusion` (the orientation filter seam with
+`imufusion` and `ahrs` Madgwick behind it, and the tip-relative-to-base rotation),
+`fusion_benchmark` (the filters scored on the emulator) and `emulator` (`Icm20948BusEmulator`, an SMBus stand-in
 that synthesises both chips from a `drivers.plant.Plant`).
 
 Real bus: `Icm20948(smbus2.SMBus(1), 0x68)`.

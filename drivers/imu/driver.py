@@ -226,6 +226,10 @@ class Icm20948:
         self.write_register(0, reg.PWR_MGMT_2, reg.PWR_MGMT_2_ALL_ON)
         # Bypass must stay off: with two chips it would put both AK09916s at 0x0C.
         self.write_register(0, reg.INT_PIN_CFG, 0x00)
+        # The master copies ST1..ST2 at every gyro sample, not on its faster duty-cycled
+        # clock (LP_CONFIG.I2C_MST_CYC, set at reset), so each burst's DRDY tells whether
+        # the magnetometer value is new since the previous sample.
+        self.write_register(0, reg.LP_CONFIG, 0x00)
         self._configure_motion()
         self._configure_aux_master()
         self._select_bank_checked(0)

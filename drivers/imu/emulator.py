@@ -3,13 +3,16 @@ AK09916 behind its auxiliary I2C master, speaking register for register.
 
 `Icm20948BusEmulator` is a drop-in for `smbus2.SMBus`: the same method names and the same
 limits (32-byte SMBus blocks, `OSError(EREMOTEIO)` for an address nobody acknowledges).
-Per chip it models the four register banks and REG_BANK_SEL, reset and sleep, the
-output data rate set by GYRO_SMPLRT_DIV, read-to-clear I2C_MST_STATUS, SLV0 (repeated
-read into EXT_SLV_SENS_DATA at every sample) and SLV4 (one transfer per enable, DONE /
-NACK status). The AK09916 model has WIA1/WIA2, power-down / single / continuous modes,
-DRDY and DOR, ST2 release of the data registers, HOFL overflow, soft reset and the
-register auto-increment of its datasheet. Not modelled: FIFO, DMP, interrupts, bank 1,
-SLV1-3, self-test, digital low-pass filtering.
+Per chip it models the four register banks and REG_BANK_SEL, reset and sleep, the gyro
+and accel output data rates (GYRO_SMPLRT_DIV, ACCEL_SMPLRT_DIV_1/2), INT_STATUS_1's
+raw-data-ready bit, the noise each DLPF setting lets through, read-to-clear
+I2C_MST_STATUS, and the auxiliary master on its own clock (LP_CONFIG.I2C_MST_CYC,
+I2C_MST_ODR_CONFIG) or on the gyro's: SLV0 (repeated transfer, reads land in
+EXT_SLV_SENS_DATA) and SLV4 (one transfer per enable, DONE / NACK status). The AK09916
+model has WIA1/WIA2, power-down / single / continuous modes, DRDY and DOR, ST2 release
+of the data registers, HOFL overflow, soft reset and the register auto-increment of its
+datasheet. Not modelled: FIFO, DMP, interrupt pins, bank 1, SLV1-3, self-test, the
+DLPF's delay (only its noise bandwidth).
 
 Data come from the plant's truth at each sample instant (plant time = `clock()`):
 
@@ -60,9 +63,10 @@ _AK_VALID_MODES = {reg.AK_MODE_POWER_DOWN, reg.AK_MODE_SINGLE, 0x10, *reg.AK_CON
 class ImuErrorModel:
     """Imperfections of one emulated IMU (all in the IMU's accel/gyro frame).
 
-    *_noise_*: white noise standard deviation per output sample. Defaults follow the
-        ICM-20948 datasheet noise densities at ~50 Hz bandwidth (accel 230 ug/sqrt(Hz),
-        gyro 0.015 deg/s/sqrt(Hz)) and a few AK09916 LSB.
+    accel/gyro_noise_density_*: white noise spectral density; the standard deviation
+        per output sample is density * sqrt(noise bandwidth of the DLPF setting). Defaults:
+        the datasheet's typical densities (accel 230 ug/sqrt(Hz), gyro 0.015
+        deg/s/sqrt(Hz)). mag_noise_ut: per-measurement standard deviation (a few LSB).
     gyro_bias_rad_s: constant bias; gyro_bias_random_walk_rad_s_per_sqrt_s: the slow
         drift added on top (a random walk).
     accel_scale_error / gyro_scale_error: per-axis fractional scale errors.
@@ -71,8 +75,8 @@ class ImuErrorModel:
     temperature_degc: die temperature reported.
     """
 
-    accel_noise_m_s2: float = 0.016
-    gyro_noise_rad_s: float = 0.0019
+    accel_noise_density_m_s2_per_sqrt_hz: float = reg.ACCEL_NOISE_DENSITY_UG_PER_SQRT_HZ * 1e-6 * reg.STANDARD_GRAVITY_M_S2
+    gyro_noise_density_rad_s_per_sqrt_hz: float = reg.GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ * reg.DEG_TO_RAD
     mag_noise_ut: float = 0.3
     gyro_bias_rad_s: Vector3 = (0.006, -0.004, 0.005)
     gyro_bias_random_walk_rad_s_per_sqrt_s: float = 2e-5
@@ -83,7 +87,8 @@ class ImuErrorModel:
     temperature_degc: float = 30.0
 
     def __post_init__(self) -> None:
-        for name in ("accel_noise_m_s2", "gyro_noise_rad_s", "mag_noise_ut", "gyro_bias_random_walk_rad_s_per_sqrt_s"):
+        for name in ("accel_noise_density_m_s2_per_sqrt_hz", "gyro_noise_density_rad_s_per_sqrt_hz", "mag_noise_ut",
+                     "gyro_bias_random_walk_rad_s_per_sqrt_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
@@ -123,9 +128,10 @@ class _EmulatedAk09916:
         self._single_due: float | None = None
         self._locked = False  # data registers read but ST2 not yet: hold them
 
-    def _latch(self, t: float) -> None:
-        if self._locked or self.regs[reg.AK_ST1] & reg.AK_ST1_DRDY:
-            # The previous measurement was never fully read: this one is skipped over it.
+    def _latch(self, t: float, *, continuous: bool) -> None:
+        if continuous and (self._locked or self.regs[reg.AK_ST1] & reg.AK_ST1_DRDY):
+            # The previous measurement was never fully read: this one is skipped over it
+            # (ST1.DOR is defined for the continuous modes only).
             self.regs[reg.AK_ST1] |= reg.AK_ST1_DOR
         if self._locked:
             return
@@ -141,12 +147,12 @@ class _EmulatedAk09916:
             if index > self._last_index:
                 skipped = index - self._last_index > 1
                 self._last_index = index
-                self._latch(self._mode_since + index / rate)
+                self._latch(self._mode_since + index / rate, continuous=True)
                 if skipped:
                     # measurements came and went unread between two looks at the die
                     self.regs[reg.AK_ST1] |= reg.AK_ST1_DOR
         elif self._single_due is not None and now >= self._single_due:
-            self._latch(self._single_due)
+            self._latch(self._single_due, continuous=False)
             self._single_due = None
             self._mode = reg.AK_MODE_POWER_DOWN
             self.regs[reg.AK_CNTL2] = reg.AK_MODE_POWER_DOWN
@@ -185,10 +191,32 @@ class _EmulatedAk09916:
             if mode not in _AK_VALID_MODES:
                 return
             self.regs[reg.AK_CNTL2] = mode
+            # A new mode command ends a read that never reached ST2: the data protection
+            # guards one read cycle of one measurement, not the next measurement's result.
+            # Pimoroni's driver reads 14 bytes from HXL (through ST2 and on, ending on HXL)
+            # and then commands the next single measurement; on silicon that one arrives.
+            self._locked = False
             self._mode = mode
             self._mode_since = now
             self._last_index = 0
             self._single_due = now + _AK_SINGLE_MEASUREMENT_S if mode == reg.AK_MODE_SINGLE else None
+
+
+class _Grid:
+    """One output-rate grid: instants origin + k * period, k counted since the last look."""
+
+    def __init__(self, origin_s: float) -> None:
+        self.origin_s = origin_s
+        self.index = 0
+
+    def advance(self, now: float, period_s: float) -> tuple[float, int] | None:
+        """(newest instant <= now, periods since the last one returned), or None."""
+        index = math.floor((now - self.origin_s) / period_s)
+        if index <= self.index:
+            return None
+        steps = index - self.index
+        self.index = index
+        return self.origin_s + index * period_s, steps
 
 
 class _EmulatedIcm20948:
@@ -212,16 +240,16 @@ class _EmulatedIcm20948:
         self.banks = [bytearray(0x80) for _ in range(reg.BANK_COUNT)]
         self.banks[0][reg.WHO_AM_I] = self.owner.who_am_i.get(self.address, reg.WHO_AM_I_VALUE)
         self.banks[0][reg.PWR_MGMT_1] = reg.PWR_MGMT_1_RESET_VALUE
+        self.banks[0][reg.LP_CONFIG] = reg.LP_CONFIG_RESET_VALUE
         self.banks[2][reg.GYRO_CONFIG_1] = 0x01  # DS 7 bank 2 map: reset value
         self.banks[2][reg.ACCEL_CONFIG] = 0x01
         self.bank = 0
         self.reset_until = now
-        self._anchor(now)
+        self._anchor_all(now)
 
-    def _anchor(self, now: float) -> None:
-        """Restart the output-rate grid (wake, or a new sample rate divider)."""
-        self.t_origin = now
-        self.last_index = 0
+    def _anchor_all(self, now: float) -> None:
+        """Restart every output-rate grid (wake)."""
+        self.gyro_grid, self.accel_grid, self.master_grid = _Grid(now), _Grid(now), _Grid(now)
 
     @property
     def awake(self) -> bool:
@@ -229,12 +257,41 @@ class _EmulatedIcm20948:
 
     @property
     def period_s(self) -> float:
+        """Gyro output period (s): 1.125 kHz / (1 + GYRO_SMPLRT_DIV)."""
         return (1 + self.banks[2][reg.GYRO_SMPLRT_DIV]) / reg.BASE_SAMPLE_RATE_HZ
+
+    @property
+    def accel_period_s(self) -> float:
+        """Accel output period (s): 1.125 kHz / (1 + ACCEL_SMPLRT_DIV), a 12-bit divider."""
+        bank2 = self.banks[2]
+        divider = ((bank2[reg.ACCEL_SMPLRT_DIV_1] << 8) | bank2[reg.ACCEL_SMPLRT_DIV_2]) & reg.ACCEL_SMPLRT_DIV_MAX
+        return (1 + divider) / reg.BASE_SAMPLE_RATE_HZ
+
+    @property
+    def master_period_s(self) -> float | None:
+        """Period (s) of the auxiliary master's own clock, or None when it follows the gyro.
+
+        LP_CONFIG.I2C_MST_CYC (set at reset, DS 7) duty-cycles the master at
+        1.1 kHz / 2^I2C_MST_ODR_CONFIG. DS 11 also says that with the gyro on "all sensors
+        (including I2C_MASTER) use the gyroscope ODR"; Pimoroni's driver, which works on
+        silicon, gives the master 5 ms between enable and disable at a 100 Hz gyro rate and
+        so relies on the faster duty-cycled clock: the emulator takes that reading."""
+        if not self.banks[0][reg.LP_CONFIG] & reg.LP_CONFIG_I2C_MST_CYC:
+            return None
+        return (1 << (self.banks[3][reg.I2C_MST_ODR_CONFIG] & 0x0F)) / reg.BASE_SAMPLE_RATE_HZ
 
     def ranges(self) -> ImuRanges:
         accel_fs = reg.ACCEL_FULL_SCALES[(self.banks[2][reg.ACCEL_CONFIG] >> 1) & 0x03][0]
         gyro_fs = reg.GYRO_FULL_SCALES[(self.banks[2][reg.GYRO_CONFIG_1] >> 1) & 0x03][0]
         return ImuRanges(accel_full_scale_g=accel_fs, gyro_full_scale_dps=gyro_fs)
+
+    def noise_std(self) -> tuple[float, float]:
+        """(accel m/s^2, gyro rad/s) white noise per sample at the current DLPF settings."""
+        bank2 = self.banks[2]
+        accel_nbw = reg.noise_bandwidth_hz(bank2[reg.ACCEL_CONFIG], reg.ACCEL_DLPF_NBW_HZ, reg.ACCEL_BYPASS_NBW_HZ)
+        gyro_nbw = reg.noise_bandwidth_hz(bank2[reg.GYRO_CONFIG_1], reg.GYRO_DLPF_NBW_HZ, reg.GYRO_BYPASS_NBW_HZ)
+        return (self.model.accel_noise_density_m_s2_per_sqrt_hz * math.sqrt(accel_nbw),
+                self.model.gyro_noise_density_rad_s_per_sqrt_hz * math.sqrt(gyro_nbw))
 
     # --- physics ----------------------------------------------------------------------
 
@@ -265,19 +322,27 @@ class _EmulatedIcm20948:
         overflow = float(np.sum(np.abs(measured))) >= reg.MAG_OVERFLOW_SUM_UT
         return encode_mag_counts((float(measured[0]), float(measured[1]), float(measured[2]))), overflow
 
-    def _sample_motion(self, t: float, steps: int) -> None:
+    def _sample_motion(self, accel_due: tuple[float, int] | None, gyro_due: tuple[float, int] | None) -> None:
+        """Latch new accel and/or gyro (+ temperature) data for their own sample instants."""
         m = self.model
-        walk = m.gyro_bias_random_walk_rad_s_per_sqrt_s * math.sqrt(steps * self.period_s)
-        self.bias_drift_rad_s = self.bias_drift_rad_s + self.rng.normal(0.0, walk, 3)
-        frame = self.truth(t)
-        accel = (1.0 + np.asarray(m.accel_scale_error)) * frame.specific_force_m_s2 + self.rng.normal(
-            0.0, m.accel_noise_m_s2, 3
-        )
-        gyro = (
-            (1.0 + np.asarray(m.gyro_scale_error)) * frame.angular_velocity_rad_s
-            + self.gyro_bias_rad_s()
-            + self.rng.normal(0.0, m.gyro_noise_rad_s, 3)
-        )
+        accel_noise, gyro_noise = self.noise_std()
+        if gyro_due is not None:
+            walk = m.gyro_bias_random_walk_rad_s_per_sqrt_s * math.sqrt(gyro_due[1] * self.period_s)
+            self.bias_drift_rad_s = self.bias_drift_rad_s + self.rng.normal(0.0, walk, 3)
+        accel = gyro = np.zeros(3)
+        accel_frame = None if accel_due is None else self.truth(accel_due[0])
+        if accel_frame is not None:
+            accel = (1.0 + np.asarray(m.accel_scale_error)) * accel_frame.specific_force_m_s2 + self.rng.normal(
+                0.0, accel_noise, 3
+            )
+        if gyro_due is not None:
+            same_instant = accel_frame is not None and accel_due is not None and accel_due[0] == gyro_due[0]
+            frame = accel_frame if same_instant else self.truth(gyro_due[0])
+            gyro = (
+                (1.0 + np.asarray(m.gyro_scale_error)) * frame.angular_velocity_rad_s
+                + self.gyro_bias_rad_s()
+                + self.rng.normal(0.0, gyro_noise, 3)
+            )
         motion = encode_motion(
             (float(accel[0]), float(accel[1]), float(accel[2])),
             (float(gyro[0]), float(gyro[1]), float(gyro[2])),
@@ -286,11 +351,13 @@ class _EmulatedIcm20948:
         )
         disabled = self.banks[0][reg.PWR_MGMT_2]
         data = self.banks[0]
-        if not disabled & reg.PWR_MGMT_2_DISABLE_ACCEL:
+        if accel_due is not None and not disabled & reg.PWR_MGMT_2_DISABLE_ACCEL:
             data[reg.ACCEL_XOUT_H : reg.GYRO_XOUT_H] = motion[0:6]
-        if not disabled & reg.PWR_MGMT_2_DISABLE_GYRO:
-            data[reg.GYRO_XOUT_H : reg.TEMP_OUT_H] = motion[6:12]
-        data[reg.TEMP_OUT_H : reg.EXT_SLV_SENS_DATA_00] = motion[12:14]
+        if gyro_due is not None:
+            if not disabled & reg.PWR_MGMT_2_DISABLE_GYRO:
+                data[reg.GYRO_XOUT_H : reg.TEMP_OUT_H] = motion[6:12]
+            data[reg.TEMP_OUT_H : reg.EXT_SLV_SENS_DATA_00] = motion[12:14]
+        data[reg.INT_STATUS_1] |= reg.INT_STATUS_1_RAW_DATA_0_RDY
 
     def _run_aux_master(self, now: float) -> None:
         if not self.banks[0][reg.USER_CTRL] & reg.USER_CTRL_I2C_MST_EN:
@@ -322,8 +389,8 @@ class _EmulatedIcm20948:
         self.banks[0][reg.I2C_MST_STATUS] |= status
 
     def tick(self, now: float) -> None:
-        """Bring the chip up to time `now`: finish a reset, latch the newest sample and run
-        the auxiliary master once for it."""
+        """Bring the chip up to time `now`: finish a reset, latch the newest accel and gyro
+        samples and run the auxiliary master once for its newest instant."""
         pwr = self.banks[0][reg.PWR_MGMT_1]
         if pwr & reg.PWR_MGMT_1_DEVICE_RESET and now >= self.reset_until:
             self._power_on(now)
@@ -331,32 +398,41 @@ class _EmulatedIcm20948:
         if not self.awake:
             self.ak.update(now)
             return
-        index = math.floor((now - self.t_origin) / self.period_s)
-        if index <= self.last_index:
-            return
-        steps = index - self.last_index
-        self.last_index = index
-        t_sample = self.t_origin + index * self.period_s
-        self._sample_motion(t_sample, steps)
-        self._run_aux_master(t_sample)
+        gyro_due = self.gyro_grid.advance(now, self.period_s)
+        accel_due = self.accel_grid.advance(now, self.accel_period_s)
+        if gyro_due is not None or accel_due is not None:
+            self._sample_motion(accel_due, gyro_due)
+        master_period = self.master_period_s
+        if master_period is None:
+            master_due = gyro_due
+        else:
+            master_due = self.master_grid.advance(now, master_period)
+        if master_due is not None:
+            self._run_aux_master(master_due[0])
+        else:
+            self.ak.update(now)
 
     # --- register access --------------------------------------------------------------
 
     def read(self, register: int, length: int, now: float) -> bytes:
         self.tick(now)
+        bank0 = self.banks[0]
         out = bytearray()
         for _ in range(length):
             if register == reg.REG_BANK_SEL:
                 out.append(self.bank << reg.BANK_SHIFT)
             else:
                 out.append(self.banks[self.bank][register])
-                if self.bank == 0 and register == reg.I2C_MST_STATUS:
-                    self.banks[0][register] = 0  # read-to-clear (DS 8, I2C_MST_STATUS)
+                if self.bank == 0 and register in (reg.I2C_MST_STATUS, reg.INT_STATUS_1):
+                    bank0[register] = 0  # read-to-clear (DS 8, I2C_MST_STATUS and INT_STATUS_1)
             register = (register + 1) & 0x7F
+        if bank0[reg.INT_PIN_CFG] & reg.INT_PIN_CFG_INT_ANYRD_2CLEAR:
+            bank0[reg.INT_STATUS_1] = 0
         return bytes(out)
 
     _READ_ONLY = {
-        0: {reg.WHO_AM_I, reg.I2C_MST_STATUS, *range(reg.ACCEL_XOUT_H, reg.EXT_SLV_SENS_DATA_00 + 24)},
+        0: {reg.WHO_AM_I, reg.I2C_MST_STATUS, reg.INT_STATUS_1,
+            *range(reg.ACCEL_XOUT_H, reg.EXT_SLV_SENS_DATA_00 + reg.EXT_SLV_SENS_DATA_COUNT)},
         3: {reg.I2C_SLV4_DI},
     }
 
@@ -381,13 +457,16 @@ class _EmulatedIcm20948:
             was_awake = self.awake
             bank[register] = value
             if self.awake and not was_awake:
-                self._anchor(now)
+                self._anchor_all(now)
             return
         if self.bank == 0 and register == reg.USER_CTRL and value & reg.USER_CTRL_I2C_MST_RST:
             value &= ~reg.USER_CTRL_I2C_MST_RST & 0xFF  # self-clearing
         bank[register] = value
+        # A new divider restarts that sensor's output grid; the master's own clock runs on.
         if self.bank == 2 and register == reg.GYRO_SMPLRT_DIV:
-            self._anchor(now)
+            self.gyro_grid = _Grid(now)
+        elif self.bank == 2 and register in (reg.ACCEL_SMPLRT_DIV_1, reg.ACCEL_SMPLRT_DIV_2):
+            self.accel_grid = _Grid(now)
 
 
 class Icm20948BusEmulator:

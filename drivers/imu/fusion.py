@@ -1,32 +1,135 @@
-"""Orientation from calibrated IMU samples with `ahrs.filters.Madgwick` (ahrs 0.4.x).
+"""Orientation of one IMU from its calibrated samples, behind one seam (`FusionCore`),
+with two implementations chosen by name (`make_core`):
 
-Checked against the installed ahrs: `Madgwick(frequency=..., gain=...)`,
-`updateMARG(q, gyr, acc, mag, dt=None)` / `updateIMU(q, gyr, acc, dt=None)`; gyro in
-rad/s, accelerometer and magnetometer used only by direction; quaternions scalar-first.
-Its earth frame has z up (a resting accelerometer reads +z) and x along the horizontal
-part of the magnetic field; its quaternion maps sensor-frame vectors into that frame,
-the same convention as `drivers.rotations`.
+- "madgwick": `ahrs.filters.Madgwick` (ahrs 0.4.x): `updateMARG(q, gyr, acc, mag, dt=None)` /
+  `updateIMU(q, gyr, acc, dt=None)`, gyro in rad/s, accelerometer and magnetometer used
+  only by direction.
+- "imufusion": x-io's Fusion (`imufusion` 1.3.x), Madgwick's revised AHRS with magnetic
+  rejection (its acceleration rejection is left off, see `IMUFUSION_*`): `Ahrs.update(gyr, acc, mag)` with gyro in deg/s,
+  accelerometer in g, `set_sample_period(dt)`, `set_quaternion`, `skip_startup`.
 
-The filter corrects only at rate `gain` (rad/s), so starting from identity a 30 degree
-tilt would take ~10 s to converge; the first sample instead sets the orientation from
+Both earth frames have z up and x along the horizontal part of the magnetic field (Fusion's
+"NWU" convention); both quaternions (w, x, y, z) map sensor-frame vectors into that
+frame, the same convention as `drivers.rotations`. The default is the winner of the
+benchmark in docs/imu-fusion.md (`drivers.imu.fusion_benchmark`).
+
+A filter corrects only at its gain's rate, so starting from identity a 30 degree tilt
+would take seconds to converge; the first sample instead sets the orientation from
 gravity and the field directly (TRIAD).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Literal, Protocol
 
+import imufusion
 import numpy as np
 from ahrs.filters import Madgwick
 
 from drivers.imu.calibration import ImuSample
+from drivers.imu.registers import DEG_TO_RAD, STANDARD_GRAVITY_M_S2
 from drivers.rotations import quat_conjugate, quat_from_matrix, quat_multiply, quat_normalize
 
+FusionName = Literal["madgwick", "imufusion"]
+FUSION_NAMES: tuple[FusionName, ...] = ("madgwick", "imufusion")
+# Measured in docs/imu-fusion.md: 0.0 deg of tilt leaked from a 15 uT disturbance against
+# Madgwick's several degrees, about 20x cheaper per update.
+DEFAULT_FUSION: FusionName = "imufusion"
 # ahrs' default MARG gain (Madgwick's beta), rad/s.
 DEFAULT_GAIN = 0.041
+# Fusion's recommended gain (x-io Fusion README) and magnetic rejection threshold. The
+# rejection timeout is longer than its README's 5 s so that a 15 s magnetic disturbance is
+# ridden out on the (bias-corrected) gyro instead of being accepted. Acceleration
+# rejection is off: on the imu-vs-em plan at the simulated rig's 10 Hz, a fast move put
+# the estimate more than 10 degrees off gravity, the accelerometer was then ignored for the
+# whole timeout and holds read up to 48 degrees wrong (18.8 degrees RMS against EM, 3.3
+# without rejection; docs/imu-fusion.md).
+IMUFUSION_GAIN = 0.5
+IMUFUSION_MAGNETIC_REJECTION_DEG = 10.0
+IMUFUSION_REJECTION_TIMEOUT_S = 20.0
 # A gap of more than this many sample periods restarts the filter from gravity and the
 # field: the orientation integrated over the gap from one gyro sample is not to be trusted.
 MAX_GAP_PERIODS = 5
+
+
+class FusionCore(Protocol):
+    """One IMU's orientation filter, stepped one sample at a time. Quaternions (w, x, y, z)
+    map the IMU frame into the earth frame (z up, x towards the horizontal field)."""
+
+    def seed(self, quaternion: np.ndarray) -> None:
+        """Start from this orientation, converged (no start-up transient)."""
+        ...
+
+    def step(self, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, mag_ut: np.ndarray | None,
+             dt_s: float) -> np.ndarray:
+        """Fuse one sample taken dt_s after the previous one; returns the orientation."""
+        ...
+
+
+class MadgwickCore:
+    """`ahrs`' Madgwick filter; gain is beta (rad/s)."""
+
+    def __init__(self, sample_rate_hz: float, gain: float = DEFAULT_GAIN) -> None:
+        self._filter = Madgwick(frequency=float(sample_rate_hz), gain=float(gain))
+        self._q = np.array([1.0, 0.0, 0.0, 0.0])
+
+    def seed(self, quaternion: np.ndarray) -> None:
+        self._q = quat_normalize(quaternion)
+
+    def step(self, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, mag_ut: np.ndarray | None,
+             dt_s: float) -> np.ndarray:
+        if mag_ut is not None:
+            q = self._filter.updateMARG(self._q, gyro_rad_s, accel_m_s2, mag_ut, dt=dt_s)
+        else:
+            q = self._filter.updateIMU(self._q, gyro_rad_s, accel_m_s2, dt=dt_s)
+        self._q = quat_normalize(np.asarray(q, dtype=float))
+        return self._q
+
+
+class ImufusionCore:
+    """x-io's Fusion AHRS (`imufusion`), NWU earth frame, with magnetic rejection
+    (`IMUFUSION_*`)."""
+
+    def __init__(self, sample_rate_hz: float, gain: float = IMUFUSION_GAIN) -> None:
+        self._ahrs = imufusion.Ahrs()
+        self._ahrs.set_settings(imufusion.AhrsSettings(
+            sample_rate=float(sample_rate_hz),
+            convention=imufusion.CONVENTION_NWU,
+            gain=float(gain),
+            gyroscope_range=0.0,  # no over-range recovery: the driver's ranges are not known here
+            acceleration_rejection=0.0,  # off, see IMUFUSION_MAGNETIC_REJECTION_DEG
+            magnetic_rejection=IMUFUSION_MAGNETIC_REJECTION_DEG,
+            rejection_timeout=IMUFUSION_REJECTION_TIMEOUT_S,  # seconds in imufusion 1.3 (measured)
+        ))
+        self._dt_s = 1.0 / sample_rate_hz
+        self._ahrs.set_sample_period(self._dt_s)
+
+    def seed(self, quaternion: np.ndarray) -> None:
+        self._ahrs.set_quaternion(np.asarray(quat_normalize(quaternion), dtype=float))
+        self._ahrs.skip_startup()
+
+    def step(self, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, mag_ut: np.ndarray | None,
+             dt_s: float) -> np.ndarray:
+        if dt_s != self._dt_s:
+            self._dt_s = dt_s
+            self._ahrs.set_sample_period(dt_s)
+        gyro_dps = np.asarray(gyro_rad_s, dtype=float) / DEG_TO_RAD
+        accel_g = np.asarray(accel_m_s2, dtype=float) / STANDARD_GRAVITY_M_S2
+        if mag_ut is not None:
+            self._ahrs.update(gyro_dps, accel_g, np.asarray(mag_ut, dtype=float))
+        else:
+            self._ahrs.update_no_magnetometer(gyro_dps, accel_g)
+        return self._ahrs.get_quaternion()
+
+
+def make_core(name: FusionName, sample_rate_hz: float, *, madgwick_gain: float = DEFAULT_GAIN) -> FusionCore:
+    """The filter called `name` ("madgwick" or "imufusion") for samples at sample_rate_hz."""
+    if name == "madgwick":
+        return MadgwickCore(sample_rate_hz, madgwick_gain)
+    if name == "imufusion":
+        return ImufusionCore(sample_rate_hz)
+    raise ValueError(f"fusion must be one of {', '.join(FUSION_NAMES)}, got {name!r}")
 
 
 def orientation_from_gravity_and_field(accel: Sequence[float], mag: Sequence[float] | None) -> np.ndarray:
@@ -54,15 +157,18 @@ def tip_relative_to_base(q_base: Sequence[float], q_tip: Sequence[float]) -> np.
 
 
 class ImuOrientationFilter:
-    """Madgwick filter for one IMU. sample_rate_hz sets the default step; gain is beta
-    (rad/s); use_magnetometer=False fuses gyro and accelerometer only (heading drifts)."""
+    """One IMU's filter (`make_core(fusion, ...)`) with its seeding and time steps.
+    sample_rate_hz sets the default step; gain is Madgwick's beta (rad/s, "madgwick" only);
+    use_magnetometer=False fuses gyro and accelerometer only (heading drifts)."""
 
-    def __init__(self, sample_rate_hz: float, *, gain: float = DEFAULT_GAIN, use_magnetometer: bool = True) -> None:
+    def __init__(self, sample_rate_hz: float, *, fusion: FusionName = DEFAULT_FUSION, gain: float = DEFAULT_GAIN,
+                 use_magnetometer: bool = True) -> None:
         if not sample_rate_hz > 0:
             raise ValueError(f"sample_rate_hz must be positive, got {sample_rate_hz!r}")
         if not gain > 0:
             raise ValueError(f"gain must be positive, got {gain!r}")
-        self._filter = Madgwick(frequency=float(sample_rate_hz), gain=float(gain))
+        self._core = make_core(fusion, float(sample_rate_hz), madgwick_gain=float(gain))
+        self.fusion = fusion
         self.default_dt_s = 1.0 / sample_rate_hz
         self.use_magnetometer = use_magnetometer
         self.quaternion: np.ndarray | None = None
@@ -80,18 +186,15 @@ class ImuOrientationFilter:
             # First sample, or after a gap: integrating the gyro's rate now over the whole
             # gap would turn one fast moment into a large, slowly corrected error.
             self.quaternion = orientation_from_gravity_and_field(sample.accel_m_s2, mag)
+            self._core.seed(self.quaternion)
             self._last_t_s = sample.t_s
             return self.quaternion.copy()
         dt = self.default_dt_s
         if self._last_t_s is not None and sample.t_s > self._last_t_s:
             dt = sample.t_s - self._last_t_s
         self._last_t_s = sample.t_s
-        gyro = np.asarray(sample.gyro_rad_s, dtype=float)
-        accel = np.asarray(sample.accel_m_s2, dtype=float)
-        if mag is not None:
-            q = self._filter.updateMARG(self.quaternion, gyro, accel, np.asarray(mag, dtype=float), dt=dt)
-        else:
-            q = self._filter.updateIMU(self.quaternion, gyro, accel, dt=dt)
+        q = self._core.step(np.asarray(sample.gyro_rad_s, dtype=float), np.asarray(sample.accel_m_s2, dtype=float),
+                            None if mag is None else np.asarray(mag, dtype=float), dt)
         self.quaternion = quat_normalize(np.asarray(q, dtype=float))
         return self.quaternion.copy()
 
@@ -99,9 +202,10 @@ class ImuOrientationFilter:
 class ImuPairFusion:
     """Base and tip filters and the tip-relative-to-base orientation."""
 
-    def __init__(self, sample_rate_hz: float, *, gain: float = DEFAULT_GAIN, use_magnetometer: bool = True) -> None:
-        self.base = ImuOrientationFilter(sample_rate_hz, gain=gain, use_magnetometer=use_magnetometer)
-        self.tip = ImuOrientationFilter(sample_rate_hz, gain=gain, use_magnetometer=use_magnetometer)
+    def __init__(self, sample_rate_hz: float, *, fusion: FusionName = DEFAULT_FUSION, gain: float = DEFAULT_GAIN,
+                 use_magnetometer: bool = True) -> None:
+        self.base = ImuOrientationFilter(sample_rate_hz, fusion=fusion, gain=gain, use_magnetometer=use_magnetometer)
+        self.tip = ImuOrientationFilter(sample_rate_hz, fusion=fusion, gain=gain, use_magnetometer=use_magnetometer)
 
     def update(self, base: ImuSample, tip: ImuSample) -> np.ndarray:
         """Fuse one sample of each; returns q_base^-1 * q_tip (w, x, y, z)."""

@@ -32,6 +32,9 @@ WHO_AM_I_VALUE = 0xEA  # DS 8
 USER_CTRL = 0x03
 USER_CTRL_I2C_MST_EN = 0x20  # DS 8 bit 5: enable the auxiliary I2C master
 USER_CTRL_I2C_MST_RST = 0x02  # DS 8 bit 1: reset the I2C master (self-clearing)
+LP_CONFIG = 0x05
+LP_CONFIG_I2C_MST_CYC = 0x40  # DS 8 bit 6: aux master duty-cycled at I2C_MST_ODR_CONFIG's rate
+LP_CONFIG_RESET_VALUE = 0x40  # DS 7 register map
 PWR_MGMT_1 = 0x06
 PWR_MGMT_1_DEVICE_RESET = 0x80  # DS 8 bit 7, self-clearing
 PWR_MGMT_1_SLEEP = 0x40  # DS 8 bit 6
@@ -43,6 +46,9 @@ PWR_MGMT_2_DISABLE_ACCEL = 0x38  # bits 5:3
 PWR_MGMT_2_DISABLE_GYRO = 0x07  # bits 2:0
 INT_PIN_CFG = 0x0F
 INT_PIN_CFG_BYPASS_EN = 0x02  # DS 8 bit 1: aux bus bridged onto the host bus
+INT_PIN_CFG_INT_ANYRD_2CLEAR = 0x10  # DS 8 bit 4: any read clears the INT_STATUS bits
+INT_STATUS_1 = 0x1A  # DS 8: bit 0 RAW_DATA_0_RDY_INT, cleared by reading it
+INT_STATUS_1_RAW_DATA_0_RDY = 0x01
 I2C_MST_STATUS = 0x17  # DS 8, read-to-clear
 I2C_MST_STATUS_SLV4_DONE = 0x40
 I2C_MST_STATUS_SLV4_NACK = 0x10
@@ -58,16 +64,20 @@ GYRO_SMPLRT_DIV = 0x00  # DS 10: ODR = 1.125 kHz / (1 + div); DS prints "1.1 kHz
 GYRO_CONFIG_1 = 0x01  # DS 10: bits 5:3 DLPFCFG, bits 2:1 FS_SEL, bit 0 FCHOICE
 ACCEL_SMPLRT_DIV_1 = 0x10  # DS 10: bits 3:0 = divider bits 11:8
 ACCEL_SMPLRT_DIV_2 = 0x11  # DS 10: divider bits 7:0
+ACCEL_SMPLRT_DIV_MAX = 0x0FFF  # 12 bits
 ACCEL_CONFIG = 0x14  # DS 10: bits 5:3 DLPFCFG, bits 2:1 FS_SEL, bit 0 FCHOICE
 CONFIG_FS_SHIFT = 1
 CONFIG_DLPF_SHIFT = 3
 CONFIG_FCHOICE_DLPF = 0x01  # FCHOICE = 1 routes the output through the DLPF
+CONFIG_DLPF_MASK = 0x07
 
 # Internal sample clock the dividers count down (DS 10, GYRO_SMPLRT_DIV and ACCEL_SMPLRT_DIV).
 BASE_SAMPLE_RATE_HZ = 1125.0
 
 # --- user bank 3 (DS 11): the auxiliary I2C master -------------------------------------
+I2C_MST_ODR_CONFIG = 0x00  # DS 11: bits 3:0; duty-cycled master rate 1.1 kHz / 2^value
 I2C_MST_CTRL = 0x01  # DS 11: bits 3:0 I2C_MST_CLK
+I2C_MST_DELAY_CTRL = 0x02  # DS 11: written by Pimoroni's driver; no effect modelled
 I2C_MST_CLK_RECOMMENDED = 0x07  # DS 11: 7 -> 345.6 kHz, recommended for a 400 kHz max bus
 I2C_SLV0_ADDR = 0x03  # DS 11: bit 7 = read (1) / write (0), bits 6:0 address
 I2C_SLV0_REG = 0x04
@@ -137,6 +147,24 @@ MAG_OVERFLOW_SUM_UT = 4912.0
 MAG_AXIS_SIGNS_IN_IMU_FRAME = (1, -1, -1)
 
 DEG_TO_RAD = math.pi / 180.0
+
+# DS 3.1 / 3.2: noise spectral densities (typical), and DS 10 tables of GYRO_DLPFCFG and
+# ACCEL_DLPFCFG: the noise bandwidth (NBW, Hz) of each DLPFCFG with FCHOICE = 1, and of
+# the filter bypassed (FCHOICE = 0). White noise per sample = density * sqrt(NBW).
+GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ = 0.015
+ACCEL_NOISE_DENSITY_UG_PER_SQRT_HZ = 230.0
+GYRO_DLPF_NBW_HZ = (229.8, 187.6, 154.3, 73.3, 35.9, 17.8, 8.9, 376.5)
+GYRO_BYPASS_NBW_HZ = 12316.0
+ACCEL_DLPF_NBW_HZ = (265.0, 265.0, 136.0, 68.8, 34.4, 17.0, 8.3, 499.0)
+ACCEL_BYPASS_NBW_HZ = 1248.0
+
+
+def noise_bandwidth_hz(config: int, table: tuple[float, ...], bypass_hz: float) -> float:
+    """Noise bandwidth (Hz) of a GYRO_CONFIG_1 / ACCEL_CONFIG value: its DLPFCFG row if
+    FCHOICE routes through the filter, else the bypass bandwidth."""
+    if not config & CONFIG_FCHOICE_DLPF:
+        return bypass_hz
+    return table[(config >> CONFIG_DLPF_SHIFT) & CONFIG_DLPF_MASK]
 
 
 def bank_select_value(bank: int) -> int:

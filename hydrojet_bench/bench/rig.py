@@ -112,5 +112,5 @@ async def _open_imus(bus, settings: RigConfig, clock: Clock) -> ImuPair:
         if imu.gyro_bias_samples:
             await chip.estimate_gyro_bias(imu.gyro_bias_samples)  # applied to the driver's calibration
         chips.append(chip)
-    return ImuPair(chips[0], chips[1], ImuPairFusion(imu.rate_hz, gain=imu.madgwick_gain,
+    return ImuPair(chips[0], chips[1], ImuPairFusion(imu.rate_hz, fusion=imu.fusion, gain=imu.madgwick_gain,
                                                      use_magnetometer=imu.use_magnetometer))

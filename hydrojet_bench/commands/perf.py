@@ -29,6 +29,7 @@ TARGETS_US = {
     "sensitivity_6_columns": 100.0,
     "online_update_cosserat": 200.0,
 }
+IMU_FUSION_TARGET_US = 10.0
 CALIBRATION_TARGETS_S = {"cosserat": 0.5, "prb": 5.0}
 DIAGNOSE_TARGET_S = 20.0
 SPEEDUP_TARGET = 300.0
@@ -107,6 +108,7 @@ def benchmark(runs: int) -> dict:
         "speedup_target": SPEEDUP_TARGET,
         "met": bool(tip_difference_mm <= 0.01 and speedup >= SPEEDUP_TARGET),
     }
+    results["imu_fusion"] = _imu_fusion_figure(runs)
     results["calibration_40_poses_9_parameters"] = _calibration_figures(params)
     results["diagnose_229_steps"] = _diagnose_figure()
     results["numba"] = {
@@ -139,6 +141,33 @@ def _online_update_us(model, params, runs: int) -> float:
         estimator.update(jets, measured)
 
     return _median_us(update, runs)
+
+
+def _imu_fusion_figure(runs: int) -> dict:
+    """One orientation-filter update (gyro, accel and magnetometer) of each fusion choice on
+    a noisy 100 Hz stream; update_us is the default's (the `[imu] fusion` key)."""
+    from drivers.imu import ImuOrientationFilter, ImuSample
+    from drivers.imu.fusion import DEFAULT_FUSION, FUSION_NAMES
+
+    rng = np.random.default_rng(100)
+    stream = [ImuSample(0.0, tuple(rng.normal((0.0, 0.0, 9.81), 0.02)), tuple(rng.normal(0.0, 0.002, 3)),
+                        tuple(rng.normal((20.0, 0.0, -45.0), 0.3)), 30.0, True) for _ in range(64)]
+    per_fusion = {}
+    for fusion in FUSION_NAMES:
+        filter_ = ImuOrientationFilter(100.0, fusion=fusion)
+        count = 0
+
+        def update() -> None:
+            nonlocal count
+            count += 1
+            sample = stream[count % len(stream)]
+            filter_.update(ImuSample(count * 0.01, sample.accel_m_s2, sample.gyro_rad_s, sample.mag_ut,
+                                     sample.temperature_degc, True))
+
+        per_fusion[fusion] = round(_median_us(update, runs), 2)
+    update_us = per_fusion[DEFAULT_FUSION]
+    return {"update_us": update_us, "target_us": IMU_FUSION_TARGET_US, "met": update_us <= IMU_FUSION_TARGET_US,
+            "fusion": DEFAULT_FUSION, "update_us_by_fusion": per_fusion}
 
 
 def _calibration_figures(params) -> dict:

@@ -39,6 +39,7 @@ from typing import Annotated
 import msgspec
 
 from drivers.imu.calibration import ImuCalibration
+from drivers.imu.fusion import DEFAULT_FUSION, FusionName
 from drivers.valve.calibration import JetCalibration
 from drivers.valve.protocol import DUTY_MAX_PERMILLE
 
@@ -254,7 +255,8 @@ class ImuTable(Table, kw_only=True):
     base_address: _ImuAddress = 0x68
     tip_address: _ImuAddress = 0x69
     rate_hz: Positive = 40.0               # fusion and logging rate
-    madgwick_gain: Positive = 0.041        # Madgwick filter beta, rad/s
+    fusion: FusionName = DEFAULT_FUSION    # "imufusion" or "madgwick": the orientation filter (docs/imu-fusion.md)
+    madgwick_gain: Positive = 0.041        # Madgwick filter beta, rad/s ("madgwick" only)
     use_magnetometer: bool = True
     gyro_bias_samples: Annotated[int, msgspec.Meta(ge=0)] = 100  # at rest, before the first command
     base: ImuChipTable = msgspec.field(default_factory=ImuChipTable)  # [imu.base]: the base chip's correction

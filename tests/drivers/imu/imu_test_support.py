@@ -40,6 +40,7 @@ def init_script(address: int = 0x68) -> list[Step]:
         W(a, 0x06, 0x01),  # wake, CLKSEL auto
         W(a, 0x07, 0x00),  # PWR_MGMT_2: all axes on
         W(a, 0x0F, 0x00),  # INT_PIN_CFG: bypass off
+        W(a, 0x05, 0x00),  # LP_CONFIG: aux master at the gyro rate, not duty-cycled
         W(a, 0x7F, 0x20),  # bank 2
         W(a, 0x00, 0x0A), R(a, 0x00, 0x0A),  # GYRO_SMPLRT_DIV = 10
         W(a, 0x01, 0x1B), R(a, 0x01, 0x1B),  # GYRO_CONFIG_1: DLPF 3, +-500 dps, FCHOICE

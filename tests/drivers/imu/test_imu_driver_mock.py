@@ -123,7 +123,7 @@ def test_reset_that_never_clears_raises_config_error() -> None:
 
 
 def test_register_that_does_not_read_back_raises_config_error() -> None:
-    script = init_script()[:10]  # up to GYRO_SMPLRT_DIV write
+    script = init_script()[:11]  # up to GYRO_SMPLRT_DIV write
     script.append(R(0x68, 0x00, 0x00))
     bus = ScriptedBus(script)
     driver, _ = make(bus)

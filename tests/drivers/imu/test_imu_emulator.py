@@ -144,6 +144,7 @@ def test_slv0_to_a_missing_aux_device_sets_nack_which_clears_on_read() -> None:
 def _start_magnetometer(emu: Icm20948BusEmulator, clock: VirtualClock, divider: int) -> None:
     """Register-level start of the aux master, with SLV4 steps done by hand."""
     wake(emu)
+    emu.write_byte_data(A, reg.LP_CONFIG, 0x00)  # the master follows the gyro's output rate
     emu.write_byte_data(A, reg.USER_CTRL, 0x20)
     bank(emu, 2)
     emu.write_byte_data(A, reg.GYRO_SMPLRT_DIV, divider)
@@ -228,8 +229,8 @@ def test_scheduled_and_random_faults() -> None:
 def test_parameters_are_validated() -> None:
     with pytest.raises(ValueError, match="fault_probability"):
         make(fault_probability=1.5)
-    with pytest.raises(ValueError, match="gyro_noise_rad_s"):
-        ImuErrorModel(gyro_noise_rad_s=-1.0)
+    with pytest.raises(ValueError, match="gyro_noise_density"):
+        ImuErrorModel(gyro_noise_density_rad_s_per_sqrt_hz=-1.0)
     with pytest.raises(ValueError, match="mag_soft_iron"):
         ImuErrorModel(mag_soft_iron=((1.0, 0.0), (0.0, 1.0)))  # type: ignore[arg-type]
     emu, _ = make()
