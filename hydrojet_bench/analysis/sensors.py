@@ -1,7 +1,7 @@
 """IMU against EM tracker: how well the cheap IMUs measure the tip relative to the base.
 
 Both sources measure the same two bodies with the same mountings, but in different
-reference frames: the EM tracker in its own frame, each Madgwick filter in its earth frame
+reference frames: the EM tracker in its own frame, each fusion filter in its earth frame
 (z up, x towards magnetic north). The tip orientation relative to the base, mountings
 removed (`Dataset.tip_orientation_in_base`), does not depend on that frame, so the
 two are compared directly.
@@ -52,7 +52,7 @@ from ..profile import RigProfile
 from .breakdowns import drift
 from .compare import Comparison, compare, compare_methods
 
-# Gravity in the Madgwick filter's earth frame (z up), m/s^2 (drivers/imu/fusion.py).
+# Gravity in the fusion filter's earth frame (z up), m/s^2 (drivers/imu/fusion.py).
 IMU_EARTH_GRAVITY_M_S2 = (0.0, 0.0, -9.81)
 # EM samples further apart than this many median EM periods are not interpolated across:
 # one lost frame (two periods) is a gap.
@@ -60,7 +60,7 @@ MAX_GAP_PERIODS = 1.5
 # A command held this long (s) counts as a static pose.
 DEFAULT_MIN_HOLD_S = 10.0
 # Settled samples of a hold start this long (s) after its command: five settling time
-# constants of the twin (0.5 s) and well past the Madgwick filter's transient.
+# constants of the twin (0.5 s) and well past the fusion filter's transient.
 DEFAULT_SETTLE_S = 2.5
 AXES = ("x", "y", "z")
 METHODS = ("ref", "online_em", "online_imu")

@@ -1,8 +1,8 @@
 """`hydrojet-bench sensors INPUT [--report DIR] [--json PATH]`: the IMUs against the EM tracker.
 
-Compares the tip orientation relative to the base measured by the two ICM-20948s
-(Madgwick-fused) with the EM tracker's over a session log: RMS and largest angle,
-accuracy and drift in static holds, per-axis and heading/tilt errors
+Compares the tip orientation relative to the base measured by the two ICM-20948s (fused
+by the profile's `[imu] fusion` filter) with the EM tracker's over a session log: RMS and
+largest angle, accuracy and drift in static holds, per-axis and heading/tilt errors
 (`hydrojet_bench.analysis.sensors`). Then it answers "are the IMUs good enough for the
 online correction?": calibrated once on the EM calibration poses (or given --params),
 the online disturbance estimator runs over the settled steps fed by EM and fed by IMU
