@@ -243,6 +243,26 @@ def hold_plan(jet_forces_n: tuple[float, float, float] = (0.0, 0.0, 0.0), durati
     return Plan((PlanStep(jet_forces_n, 0, 0, duration_s),))
 
 
+def _cell_number(value: object, key: str) -> float:
+    """A plan cell as a number: a TOML number, or CSV text in plain decimal notation
+    (``1_000``, which Python's float() reads as 1000, is refused as a likely typo)."""
+    if isinstance(value, str) and "_" not in value:
+        try:
+            return float(value)
+        except ValueError:
+            pass
+    elif _is_int(value) or isinstance(value, (float, np.floating)):
+        return float(value)  # type: ignore[arg-type]
+    raise ValueError(f"{key} must be a number, got {value!r}")
+
+
+def _cell_integer(value: object, key: str) -> int:
+    number = _cell_number(value, key)
+    if not number.is_integer():
+        raise ValueError(f"{key} must be an integer, got {value!r}")
+    return int(number)
+
+
 def plan_from_rows(rows: list[dict[str, object]], source: str, default_settle_s: float = DEFAULT_SETTLE_S) -> Plan:
     """A plan from table rows with keys q1, q2, q3 (N), and optionally settle_s (s), sweep
     and step; ``source`` names the file in errors ("plan.csv, row 3: ...")."""
@@ -257,11 +277,11 @@ def plan_from_rows(rows: list[dict[str, object]], source: str, default_settle_s:
         if missing:
             raise ValueError(f"{source}, row {number}: missing {', '.join(missing)} (jet forces, N)")
         try:
-            sweep = int(row.get("sweep", 0))  # type: ignore[arg-type]
-            step = int(row.get("step", counters.get(sweep, 0)))  # type: ignore[arg-type]
+            sweep = _cell_integer(row.get("sweep", 0), "sweep")
+            step = _cell_integer(row.get("step", counters.get(sweep, 0)), "step")
             counters[sweep] = step + 1
-            steps.append(PlanStep(tuple(float(row[key]) for key in ("q1", "q2", "q3")),  # type: ignore[arg-type]
-                                  sweep, step, float(row.get("settle_s", default_settle_s))))  # type: ignore[arg-type]
+            steps.append(PlanStep(tuple(_cell_number(row[key], key) for key in ("q1", "q2", "q3")),  # type: ignore[arg-type]
+                                  sweep, step, _cell_number(row.get("settle_s", default_settle_s), "settle_s")))
         except (TypeError, ValueError) as error:
             raise ValueError(f"{source}, row {number}: {error}") from None
     if not steps:

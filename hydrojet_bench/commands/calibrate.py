@@ -59,5 +59,5 @@ def run(args: argparse.Namespace) -> int:
                      "poses": len(steps.calibration_rows()),
                      "rms_orientation_deg_before": round(result.rms_orientation_deg_before, 4),
                      "rms_orientation_deg_after": round(result.rms_orientation_deg_after, 4)}))
-    console.print(f"wrote {args.output}")
+    console.print(f"wrote {render.plain(args.output)}")
     return 0

@@ -77,12 +77,13 @@ def run(args: argparse.Namespace) -> int:
                              seed=args.seed,
                              command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]))
     console = render.console_for(args)
-    console.print(f"session on [bold]{profile.name}[/] ({'simulated rig' if settings.transports.simulated else 'rig'}): "
+    console.print(f"session on [bold]{render.plain(profile.name)}[/] ({'simulated rig' if settings.transports.simulated else 'rig'}): "
                   f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.session.time_scale:g}, "
-                  f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; log {log_path}")
+                  f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; "
+                  f"log {render.plain(log_path)}", highlight=False)
     result = asyncio.run(_run_session(request, console, live=not args.no_live and console.is_terminal))
     if result is None:
-        console.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {log_path}")
+        console.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
         return 143
     _print_outcome(console, result, model.name, args)
     return 0
@@ -132,7 +133,7 @@ def _printer(console: Console):
             ref = "-" if status.ref_error_deg is None else f"{status.ref_error_deg:.2f}"
             console.print(f"step {status.step_index + 1}/{status.step_count} {status.phase}: tip error ref {ref} deg, "
                           f"online {online} deg; EM {status.em_frames} frames, IMU {status.imu_samples} samples",
-                          highlight=False)
+                          highlight=False, markup=False)
 
     return update
 
@@ -161,11 +162,11 @@ def _print_outcome(console: Console, result, model_name: str, args: argparse.Nam
                 from ..analysis.report import write_report
 
                 for path in write_report(args.report, results, validation_steps, model_name):
-                    console.print(f"wrote {path}")
+                    console.print(f"wrote {render.plain(path)}")
     log = result.log_path
     console.print("\nnext:")
     for line in (f"hydrojet-bench replay {log} --online            # re-run the estimation offline",
                  f"hydrojet-bench compare {log} --params P.toml --online  # Table II from the log",
                  f"hydrojet-bench diagnose {log} --model {model_name}     # which physical effect is missing?",
                  f"hydrojet-bench sensors {log} --report sensors/  # IMU versus EM tracker"):
-        console.print(f"  {line}", highlight=False)
+        console.print(f"  {render.plain(line)}", highlight=False)

@@ -44,5 +44,5 @@ def run(args: argparse.Namespace) -> int:
     rows = write_csv(recording.to_dataset(profile, f"twin seed {config.seed}"), args.output)
     hidden_names = ", ".join(effect.name for effect in hidden) or "none"
     Console().print(f"wrote {rows} samples (229 steps: 40 calibration poses, 9 sweeps) to {args.output}; "
-                    f"hidden effects: {hidden_names}")
+                    f"hidden effects: {hidden_names}", markup=False)
     return 0

@@ -39,6 +39,7 @@ from typing import Annotated
 import msgspec
 
 from drivers.imu.calibration import ImuCalibration
+from drivers.transport.url import open_transport
 from drivers.valve.calibration import JetCalibration
 from drivers.valve.protocol import DUTY_MAX_PERMILLE
 
@@ -212,6 +213,13 @@ class TransportsTable(Table, kw_only=True):
             if not (value in (SIM, PTY) or "://" in value or value.startswith("/")):
                 raise ValueError(f'{name} must be "sim", "pty" or a transport URL (serial:///dev/ttyUSB0, '
                                  f"pty:///dev/pts/7, /dev/ttyUSB0), got {value!r}")
+            if value not in (SIM, PTY):
+                # Parsed now (not opened), so a bad scheme or baud is named with its key
+                # when the profile loads rather than as a driver's error mid-session.
+                try:
+                    open_transport(value)
+                except ValueError as error:
+                    raise ValueError(f"{name}: {error}") from None
         if self.imu_bus != SIM and (isinstance(self.imu_bus, str) or self.imu_bus < 0):
             raise ValueError(f'imu_bus must be "sim" or an I2C bus number (>= 0), got {self.imu_bus!r}')
 

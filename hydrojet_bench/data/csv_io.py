@@ -229,6 +229,13 @@ def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
 def _parse_numbers(strings: tuple[str, ...], column: str, problem: _Problem, column_order: int,
                    where: Callable[[int, str], str], *, integer: bool) -> np.ndarray | None:
     """One column's cells as numbers; problems go to ``problem`` (None returned)."""
+    if "_" in "".join(strings):
+        # float() reads "1_000" as 1000: a digit-group separator is more likely a typo
+        # (a merged cell, a mistyped decimal point) than data, so refuse it.
+        i = next(i for i, text in enumerate(strings) if "_" in text)
+        problem.offer(i, column_order, f"{where(i, column)}: {strings[i].strip()!r} is not a number "
+                                       "(no '_' separators)")
+        return None
     try:
         array = np.array(strings, dtype=float)  # fast path; same grammar as float()
     except ValueError:
