@@ -22,11 +22,12 @@ import msgspec
 import numpy as np
 from rich.console import Console
 
+from ..config.schema import MAX_TIME_SCALE
 from ..errors import UserError
 from ..model_choice import ModelDefaults, model_choice
 from ..profile import load_profile
 from . import render
-from .common import add_model_arguments
+from .common import add_model_arguments, check_seed
 
 DEFAULT_LOG_DIR = Path("sessions")
 
@@ -54,17 +55,20 @@ def run(args: argparse.Namespace) -> int:
     from ..bench.plan_choice import choose_plan
     from ..bench.session import SessionRequest
 
+    check_seed(args.seed)
     profile = load_profile(args.profile)
     settings = profile.config
     if args.time_scale is not None:
-        if not args.time_scale > 0:
-            raise UserError(f"--time-scale must be > 0, got {args.time_scale}")
+        if not 0 < args.time_scale <= MAX_TIME_SCALE:
+            raise UserError(f"--time-scale must be > 0 and at most {MAX_TIME_SCALE:g} (the simulated rig "
+                            f"cannot keep up beyond), got {args.time_scale}")
         if not settings.transports.simulated and args.time_scale != 1.0:
             raise UserError("--time-scale applies to the simulated rig only; this profile drives real devices")
         settings = msgspec.structs.replace(settings, session=msgspec.structs.replace(settings.session,
                                                                                      time_scale=args.time_scale))
     plan = choose_plan(args.plan, settle_s=settings.session.settle_s)
-    choice = model_choice(args, ModelDefaults(settings.estimator.model, tuple(settings.estimator.effects)))
+    choice = model_choice(args, ModelDefaults(settings.estimator.model, tuple(settings.estimator.effects),
+                                              origin=f"{profile.source} (estimator.effects)"))
     model, requested = choice.model, choice.requested
     log_path = args.log or DEFAULT_LOG_DIR / f"{profile.name}-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
     try:

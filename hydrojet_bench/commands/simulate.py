@@ -17,6 +17,7 @@ from ..effects import load_effect
 from ..plans import paper_protocol
 from ..profile import load_profile
 from ..twin import DigitalTwin, TwinConfig
+from .common import check_seed
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -31,6 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_seed(args.seed)
     profile = load_profile(args.profile)
     changes: dict[str, object] = {}
     if args.hidden:

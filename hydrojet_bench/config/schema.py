@@ -44,7 +44,7 @@ from drivers.valve.calibration import JetCalibration
 from drivers.valve.protocol import DUTY_MAX_PERMILLE
 
 from ..models import MODELS
-from ..params import JET_COUNT, CapsuleParameters, JetLayout, RodParameters
+from ..params import JET_COUNT, CapsuleParameters, JetLayout, RodParameters, check_plausible
 
 # Device transports in [transports]: "sim" serves an in-process emulator on the digital
 # twin, "pty" the same emulator on a pseudo-terminal (the serial code path).
@@ -160,6 +160,11 @@ class RodTable(Table, kw_only=True):
     poisson_ratio: Annotated[float, msgspec.Meta(gt=-1.0, le=0.5)] = _ROD.poisson_ratio
     youngs_modulus_base_pa: Positive = _ROD.youngs_modulus_base_pa  # E at the clamp, Pa
     youngs_modulus_tip_pa: Positive = _ROD.youngs_modulus_tip_pa    # E at the tip, Pa
+
+    def __post_init__(self) -> None:
+        for name, field_name in (("E0", "youngs_modulus_base_pa"), ("EL", "youngs_modulus_tip_pa"),
+                                 ("L", "length_m")):
+            check_plausible(name, getattr(self, field_name), field_name)
 
     def parameters(self) -> RodParameters:
         return RodParameters(**msgspec.structs.asdict(self))
@@ -319,10 +324,16 @@ class ValvesTable(Table, kw_only=True):
                      for table, limit in zip(tables, jets.max_force_per_jet_n, strict=True))
 
 
+# Beyond this the simulated devices' loops fall behind the session clock (measured: at
+# x3000 a 1 s plan takes 1700 s of session time and no step is estimated).
+MAX_TIME_SCALE = 1000.0
+
+
 class SessionTable(Table, kw_only=True):
     settle_s: Positive = 5.0          # hold each command this long, session s (the paper: 5 s)
     window_s: Positive = 1.0          # average the last window_s of each step, session s
-    time_scale: Positive = 1.0        # session seconds per wall second (> 1 only on the sim rig)
+    # session seconds per wall second (> 1 only on the sim rig)
+    time_scale: Annotated[float, msgspec.Meta(gt=0.0, le=MAX_TIME_SCALE)] = 1.0
     flush_interval_s: Positive = 1.0  # log flush period, wall s: what a crash may lose
 
     def __post_init__(self) -> None:
