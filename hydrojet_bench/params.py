@@ -24,6 +24,10 @@ Vector3 = tuple[float, float, float]
 # The HydroJet capsule carries three water jets (paper eq. 5); every per-jet tuple has
 # this length.
 JET_COUNT = 3
+# The most a jet of the capsule plausibly pushes, N: the paper's jets give ~0.1 N, and
+# beyond ~10 N the nominal rod has no static equilibrium the models can find (measured:
+# 10 N on one jet converges, 20 N does not). A larger limit in a file is a typo.
+MAX_PLAUSIBLE_JET_FORCE_N = 10.0
 
 
 def _check_finite(owner: str, name: str, value: float) -> None:

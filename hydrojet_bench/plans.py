@@ -137,6 +137,19 @@ class Plan:
         """Total time the plan takes to play, s."""
         return float(sum(s.settle_s for s in self.steps))
 
+    def clipped(self, max_force_per_jet_n: tuple[float, float, float]) -> tuple["Plan", tuple[int, ...]]:
+        """This plan with every force above its jet's limit (N) lowered to the limit, as
+        the valves apply it, and the indices of the steps that changed."""
+        limits = np.asarray(max_force_per_jet_n, dtype=float)
+        steps, changed = [], []
+        for index, step in enumerate(self.steps):
+            forces = np.minimum(step.jet_forces_n, limits)
+            if np.any(forces < step.jet_forces_n):
+                changed.append(index)
+                step = PlanStep(tuple(float(f) for f in forces), step.sweep, step.step, step.settle_s)  # type: ignore[arg-type]
+            steps.append(step)
+        return Plan(tuple(steps)), tuple(changed)
+
 
 def _resultant_to_jets(resultant_xy_n: np.ndarray) -> np.ndarray:
     """Non-negative jet forces whose resultant (eq. 5, ring angle 0) is the given tip-frame

@@ -66,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
             raise UserError("--time-scale applies to the simulated rig only; this profile drives real devices")
         settings = msgspec.structs.replace(settings, session=msgspec.structs.replace(settings.session,
                                                                                      time_scale=args.time_scale))
-    plan = choose_plan(args.plan, settle_s=settings.session.settle_s)
+    plan, clipped = choose_plan(args.plan, settle_s=settings.session.settle_s).clipped(
+        tuple(table.max_force_n for table in settings.valve_calibrations()))
     choice = model_choice(args, ModelDefaults(settings.estimator.model, tuple(settings.estimator.effects),
                                               origin=f"{profile.source} (estimator.effects)"))
     model, requested = choice.model, choice.requested
@@ -85,12 +86,21 @@ def run(args: argparse.Namespace) -> int:
                   f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.session.time_scale:g}, "
                   f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; "
                   f"log {render.plain(log_path)}", highlight=False)
+    if clipped:
+        shown = ", ".join(str(index + 1) for index in clipped[:5]) + (", ..." if len(clipped) > 5 else "")
+        console.print(f"[yellow]warning:[/] {len(clipped)} step(s) of the plan ({shown}) ask more than the valves "
+                      f"give ({_newtons(settings.valve_calibrations())} N per jet): they are played, logged and "
+                      "predicted at the clipped force")
     result = asyncio.run(_run_session(request, console, live=not args.no_live and console.is_terminal))
     if result is None:
         console.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
         return 143
     _print_outcome(console, result, model.name, args)
     return 0
+
+
+def _newtons(calibrations) -> str:
+    return ", ".join(f"{table.max_force_n:g}" for table in calibrations)
 
 
 async def _run_session(request, console: Console, live: bool):

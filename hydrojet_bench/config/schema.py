@@ -44,7 +44,7 @@ from drivers.valve.calibration import JetCalibration
 from drivers.valve.protocol import DUTY_MAX_PERMILLE
 
 from ..models import MODELS
-from ..params import JET_COUNT, CapsuleParameters, JetLayout, RodParameters, check_plausible
+from ..params import JET_COUNT, MAX_PLAUSIBLE_JET_FORCE_N, CapsuleParameters, JetLayout, RodParameters, check_plausible
 
 # Device transports in [transports]: "sim" serves an in-process emulator on the digital
 # twin, "pty" the same emulator on a pseudo-terminal (the serial code path).
@@ -189,6 +189,9 @@ class JetsTable(Table, kw_only=True):
         if isinstance(self.max_force_n, tuple) and len(self.max_force_n) != JET_COUNT:
             raise ValueError(f"max_force_n must be a number or a list of {JET_COUNT} numbers (N), "
                              f"got {len(self.max_force_n)} numbers")
+        if max(self.max_force_per_jet_n) > MAX_PLAUSIBLE_JET_FORCE_N:
+            raise ValueError(f"max_force_n = {max(self.max_force_per_jet_n):g} N is outside the plausible range "
+                             f"0 .. {MAX_PLAUSIBLE_JET_FORCE_N:g} N (a unit slip?)")
 
     def layout(self) -> JetLayout:
         return JetLayout(ring_angle_rad=math.radians(self.ring_angle_deg))
@@ -224,7 +227,7 @@ class TransportsTable(Table, kw_only=True):
                 try:
                     open_transport(value)
                 except ValueError as error:
-                    raise ValueError(f"{name}: {error}") from None
+                    raise ValueError(f"{name} is not a usable transport URL: {error}") from None
         if self.imu_bus != SIM and (isinstance(self.imu_bus, str) or self.imu_bus < 0):
             raise ValueError(f'imu_bus must be "sim" or an I2C bus number (>= 0), got {self.imu_bus!r}')
 
