@@ -48,13 +48,21 @@ def main(argv: list[str] | None = None) -> int:
         _print_error(str(error))
         return 2
     except ConvergenceError as error:
-        # Parameters or forces the rod cannot carry (a 7 m rod, 100 N on a jet): the
-        # user's inputs, not a bug, so one line instead of a traceback.
-        _print_error(f"{error}; check the parameters and the jet forces")
+        # Parameters or forces the rod cannot carry (a tip load that buckles it, a huge
+        # jet force): the user's inputs, not a bug, so one line naming them.
+        _print_error(f"{error}; check the parameters and forces in {_input_files(args)}")
         return 2
     except KeyboardInterrupt:
         Console(stderr=True).print("interrupted")
         return 130
+
+
+def _input_files(args: argparse.Namespace) -> str:
+    files = [str(value) for option in ("params", "baseline", "profile", "plan", "input")
+             if (value := getattr(args, option, None)) is not None]
+    effect_files = [spec for option in ("effect", "hidden") for spec in getattr(args, option, None) or ()
+                    if ":" in spec]
+    return ", ".join(effect_files + files) or "the command's inputs"
 
 
 def _print_error(message: str) -> None:

@@ -186,8 +186,9 @@ def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
     orientations = {}
     for sensor, quaternion_columns in _QUATERNIONS.items():
         q = np.column_stack([values[c] for c in quaternion_columns])
-        norm = np.linalg.norm(q, axis=1)
-        bad = np.flatnonzero(np.abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE)
+        with np.errstate(over="ignore"):  # a 1e308 component: its norm is inf, reported below
+            norm = np.linalg.norm(q, axis=1)
+        bad = np.flatnonzero(~(np.abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE))
         if len(bad):
             i = int(bad[0])
             first = min(order[c] for c in quaternion_columns)
@@ -258,7 +259,8 @@ def _parse_numbers(strings: tuple[str, ...], column: str, problem: _Problem, col
         problem.offer(i, column_order, f"{where(i, column)}: must be a finite number, got {strings[i].strip()}")
         return None
     if integer:
-        fractional = np.flatnonzero(array != np.round(array))
+        # Labels, not measurements: beyond 2**53 a float no longer holds every integer.
+        fractional = np.flatnonzero((array != np.round(array)) | (np.abs(array) > 2.0**53))
         if len(fractional):
             i = int(fractional[0])
             problem.offer(i, column_order, f"{where(i, column)}: {strings[i].strip()!r} is not an integer")
