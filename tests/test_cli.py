@@ -134,3 +134,14 @@ def test_a_step_above_the_valves_limit_is_predicted_at_the_clipped_force_with_a_
     np.testing.assert_allclose(step.jet_forces_n, (0.15, 0.0, 0.0), atol=1e-12)
     (prediction, *_) = read_log(tmp_path / "x.mcap", topics=["/model/prediction"]).messages
     assert prediction.orientation_error_deg < 5.0  # at 0.3 N the prediction was 24.7 deg off
+
+
+@pytest.mark.parametrize("table", ["transport", "sesion", "valve", "rood"])
+def test_a_misspelt_table_in_the_shipped_profile_stops_run_before_anything_runs(tmp_path, capsys, table):
+    proper = {"transport": "transports", "sesion": "session", "valve": "valves", "rood": "rod"}[table]
+    profile = tmp_path / "hydrojet-v1.toml"
+    profile.write_text((PROFILES_DIR / "hydrojet-v1.toml").read_text().replace(f"[{proper}]", f"[{table}]"))
+    message = one_line_error(capsys, ["run", "--profile", str(profile), "--plan", "calibration",
+                                      "--log", str(tmp_path / "x.mcap")])
+    assert message.startswith(f"{profile}: {table} is not a known key; did you mean {proper}?"), message
+    assert not (tmp_path / "x.mcap").exists()

@@ -151,10 +151,11 @@ def _replace_value(line: bytes, column: float, value: bytes, cells: bool) -> byt
 # --- the invariant -----------------------------------------------------------------------
 
 
-def check(target: str, argv: list[str], mutated: Path, inputs: list[Path]) -> int:
-    """Run ``argv``; assert the invariant for ``mutated`` (the file that was changed)."""
+def check(target: str, argv: list[str], mutated: Path, inputs: list[Path], success_shows: str) -> int:
+    """Run ``argv``; assert the invariant for ``mutated`` (the file that was changed); a
+    success must print ``success_shows`` (its result)."""
     before = {path: path.read_bytes() for path in inputs}
-    code, _, err = invoke(argv)
+    code, out, err = invoke(argv)
     counts = COUNTS.setdefault(target, Counter())
     counts["tried"] += 1
     assert "Traceback" not in err, err
@@ -165,6 +166,7 @@ def check(target: str, argv: list[str], mutated: Path, inputs: list[Path]) -> in
         assert mutated.name in lines[0], f"the message does not name {mutated.name}: {lines[0]}"
         counts["clean errors"] += 1
     else:
+        assert success_shows in " ".join(out.split()), out
         counts["successes"] += 1
     for path, content in before.items():
         assert path.read_bytes() == content, f"{path} was changed"
@@ -191,16 +193,17 @@ def test_csv_tables_through_compare(seeds: Path, steps: list[tuple]) -> None:
     with tempfile.TemporaryDirectory() as name:
         data = write_mutated(Path(name), "data.csv", seeds / "data.csv", steps, cells=True)
         check("csv/compare", ["compare", str(data), "--params", str(seeds / "params.toml")], data,
-              [data, seeds / "params.toml"])
+              [data, seeds / "params.toml"], "RMS errors")
 
 
-@fuzz_settings(4)
+@fuzz_settings(8)
 @given(steps=mutations(cells=True))
 def test_csv_tables_through_calibrate(seeds: Path, steps: list[tuple]) -> None:
     with tempfile.TemporaryDirectory() as name:
         data = write_mutated(Path(name), "data.csv", seeds / "data.csv", steps, cells=True)
         output = Path(name) / "out.toml"
-        if check("csv/calibrate", ["calibrate", str(data), "-o", str(output), "--model", "prb"], data, [data]) == 0:
+        if check("csv/calibrate", ["calibrate", str(data), "-o", str(output), "--model", "prb"], data, [data],
+                 "RMS orientation error on the calibration poses") == 0:
             assert read_parameter_file(output).model == "prb"
 
 
@@ -210,17 +213,18 @@ def test_profiles_through_compare(seeds: Path, steps: list[tuple]) -> None:
     with tempfile.TemporaryDirectory() as name:
         profile = write_mutated(Path(name), "rig.toml", seeds / "rig.toml", steps)
         check("profile/compare", ["compare", str(seeds / "data.csv"), "--profile", str(profile),
-                                  "--params", str(seeds / "params.toml")], profile, [profile, seeds / "data.csv"])
+                                  "--params", str(seeds / "params.toml")], profile, [profile, seeds / "data.csv"],
+              "RMS errors")
 
 
-@fuzz_settings(15)
+@fuzz_settings(30)
 @given(steps=mutations())
 def test_profiles_through_run(seeds: Path, steps: list[tuple]) -> None:
     with tempfile.TemporaryDirectory() as name:
         profile = write_mutated(Path(name), "rig.toml", seeds / "rig.toml", steps)
         check("profile/run", ["run", "--profile", str(profile), "--plan", str(seeds / "plan.toml"), "--no-live",
                               "--no-calibration", "--log", str(Path(name) / "x.mcap")], profile,
-              [profile, seeds / "plan.toml"])
+              [profile, seeds / "plan.toml"], "session done: 2/2 steps")
 
 
 @fuzz_settings(120)
@@ -229,16 +233,16 @@ def test_parameter_files_through_compare(seeds: Path, steps: list[tuple]) -> Non
     with tempfile.TemporaryDirectory() as name:
         params = write_mutated(Path(name), "params.toml", seeds / "params.toml", steps)
         check("params/compare", ["compare", str(seeds / "data.csv"), "--params", str(params)], params,
-              [params, seeds / "data.csv"])
+              [params, seeds / "data.csv"], "RMS errors")
 
 
-@fuzz_settings(25)
+@fuzz_settings(40)
 @given(steps=mutations(), suffix=st.sampled_from(["toml", "csv"]))
 def test_plan_files_through_run(seeds: Path, steps: list[tuple], suffix: str) -> None:
     with tempfile.TemporaryDirectory() as name:
         plan = write_mutated(Path(name), f"plan.{suffix}", seeds / f"plan.{suffix}", steps, cells=suffix == "csv")
         check("plan/run", ["run", "--plan", str(plan), "--no-live", "--no-calibration", "--time-scale", "20",
-                           "--log", str(Path(name) / "x.mcap")], plan, [plan])
+                           "--log", str(Path(name) / "x.mcap")], plan, [plan], "session done")
 
 
 @fuzz_settings(60)
@@ -253,12 +257,14 @@ def test_effect_files_through_compare(seeds: Path, line: int, value: str, steps:
         effect = Path(name) / "effect.py"
         effect.write_bytes(mutate("\n".join(lines).encode(), steps, cells=False))
         check("effect/compare", ["compare", str(seeds / "data.csv"), "--params", str(seeds / "params.toml"),
-                                 "--effect", f"{effect}:WaterLineTwist"], effect, [effect, seeds / "data.csv"])
+                                 "--effect", f"{effect}:WaterLineTwist"], effect, [effect, seeds / "data.csv"],
+              "RMS errors")
 
 
-@fuzz_settings(2)
+@fuzz_settings(4)
 @given(steps=mutations(cells=True))
 def test_csv_tables_through_diagnose(seeds: Path, steps: list[tuple]) -> None:
     with tempfile.TemporaryDirectory() as name:
         data = write_mutated(Path(name), "data.csv", seeds / "data.csv", steps, cells=True)
-        check("csv/diagnose", ["diagnose", str(data), "--candidate", "jet_gain", "--workers", "1"], data, [data])
+        check("csv/diagnose", ["diagnose", str(data), "--candidate", "jet_gain", "--workers", "1"], data, [data],
+              "verdict")
