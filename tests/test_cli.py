@@ -127,7 +127,11 @@ def test_a_step_above_the_valves_limit_is_predicted_at_the_clipped_force_with_a_
     assert main(["run", "--plan", str(plan), "--no-live", "--time-scale", "20", "--no-calibration",
                  "--log", str(tmp_path / "x.mcap")]) == 0
     out = " ".join(capsys.readouterr().out.split())
-    assert "warning: 1 step(s) of the plan (1) ask more than the valves give (0.15, 0.15, 0.15 N per jet)" in out
+    warning = "1 step(s) of the plan (1) ask more than the valves give (0.15, 0.15, 0.15 N per jet)"
+    assert f"warning: {warning}" in out
+    assert "step 1/1 sweep 0 (clipped to the valves' limit): tip error ref" in out
+    events = read_log(tmp_path / "x.mcap", topics=["/events"]).messages
+    assert any(e.level == "warning" and e.message.startswith(warning) for e in events)
     commands = [m.jet_forces_n for m in read_log(tmp_path / "x.mcap", topics=["/valves/command"]).messages]
     assert (0.15, 0.0, 0.0) in [tuple(c) for c in commands] and max(max(c) for c in commands) == 0.15
     (step,) = read_log(tmp_path / "x.mcap", topics=["/bench/step"]).messages

@@ -36,7 +36,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("run", help="run a bench session (simulated rig by default)")
     parser.add_argument("--profile", default="sim", help="rig profile: a TOML file or a shipped name (default: sim)")
     parser.add_argument("--plan", default="paper",
-                        help="paper (default), calibration, sweeps, imu-vs-em, hold[:SECONDS], or a .csv/.toml plan file")
+                        help="paper (default), calibration[:COUNT], sweeps, imu-vs-em, hold[:SECONDS], or a .csv/.toml "
+                             "plan file")
     parser.add_argument("--log", type=Path, metavar="FILE",
                         help=f"MCAP log to write (default: {DEFAULT_LOG_DIR}/<profile>-<time>.mcap)")
     add_model_arguments(parser, default="the profile's [estimator] model",
@@ -66,8 +67,9 @@ def run(args: argparse.Namespace) -> int:
             raise UserError("--time-scale applies to the simulated rig only; this profile drives real devices")
         settings = msgspec.structs.replace(settings, session=msgspec.structs.replace(settings.session,
                                                                                      time_scale=args.time_scale))
-    plan, clipped = choose_plan(args.plan, settle_s=settings.session.settle_s).clipped(
-        tuple(table.max_force_n for table in settings.valve_calibrations()))
+    limits = tuple(table.max_force_n for table in settings.valve_calibrations())
+    plan, clipped = choose_plan(args.plan, settle_s=settings.session.settle_s).clipped(limits)
+    clipped_warning = _clipped_warning(clipped, limits)
     choice = model_choice(args, ModelDefaults(settings.estimator.model, tuple(settings.estimator.effects),
                                               origin=f"{profile.source} (estimator.effects)"))
     model, requested = choice.model, choice.requested
@@ -79,19 +81,17 @@ def run(args: argparse.Namespace) -> int:
     request = SessionRequest(profile=profile, settings=settings, plan=plan, log_path=log_path, model=model,
                              effects=choice.effect_specs, params=choice.parameters(profile.model_parameters()),
                              calibrate=not args.no_calibration, calibration_names=choice.calibration_names,
-                             seed=args.seed,
+                             seed=args.seed, warnings=(clipped_warning,) if clipped_warning else (),
                              command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]))
     console = render.console_for(args)
     console.print(f"session on [bold]{render.plain(profile.name)}[/] ({'simulated rig' if settings.transports.simulated else 'rig'}): "
                   f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.session.time_scale:g}, "
                   f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; "
                   f"log {render.plain(log_path)}", highlight=False)
-    if clipped:
-        shown = ", ".join(str(index + 1) for index in clipped[:5]) + (", ..." if len(clipped) > 5 else "")
-        console.print(f"[yellow]warning:[/] {len(clipped)} step(s) of the plan ({shown}) ask more than the valves "
-                      f"give ({_newtons(settings.valve_calibrations())} N per jet): they are played, logged and "
-                      "predicted at the clipped force")
-    result = asyncio.run(_run_session(request, console, live=not args.no_live and console.is_terminal))
+    if clipped_warning:
+        console.print(f"[yellow]warning:[/] {clipped_warning}")
+    result = asyncio.run(_run_session(request, console, live=not args.no_live and console.is_terminal,
+                                      clipped=frozenset(clipped)))
     if result is None:
         console.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
         return 143
@@ -99,11 +99,16 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _newtons(calibrations) -> str:
-    return ", ".join(f"{table.max_force_n:g}" for table in calibrations)
+def _clipped_warning(clipped: tuple[int, ...], limits: tuple[float, ...]) -> str:
+    if not clipped:
+        return ""
+    shown = ", ".join(str(index + 1) for index in clipped[:5]) + (", ..." if len(clipped) > 5 else "")
+    return (f"{len(clipped)} step(s) of the plan ({shown}) ask more than the valves give "
+            f"({', '.join(f'{limit:g}' for limit in limits)} N per jet): they are played, logged and predicted "
+            "at the clipped force")
 
 
-async def _run_session(request, console: Console, live: bool):
+async def _run_session(request, console: Console, live: bool, clipped: frozenset[int]):
     from ..bench.live_view import LiveView
     from ..bench.session import Session
 
@@ -121,7 +126,7 @@ async def _run_session(request, console: Console, live: bool):
         if live else contextlib.nullcontext()
     try:
         with view_context as view:
-            on_update = view.update if live else _printer(console)
+            on_update = view.update if live else _printer(console, clipped)
             session = Session(request, on_update=on_update)
             return await session.run()
     except asyncio.CancelledError:
@@ -133,19 +138,22 @@ async def _run_session(request, console: Console, live: bool):
         loop.remove_signal_handler(signal.SIGTERM)
 
 
-def _printer(console: Console):
+def _printer(console: Console, clipped: frozenset[int]):
     last = [-1]
 
     def update(status) -> None:
-        # One line per sweep (and per 10 calibration poses) keeps a log file readable.
+        # One line per sweep (and per 10 calibration poses, and per clipped step) keeps a
+        # log file readable.
         step = status.step
         if step is None or status.step_index == last[0]:
             return
         last[0] = status.step_index
-        if status.phase == "done" or step.step % 10 == 0 or status.step_index + 1 == status.step_count:
+        if (status.phase == "done" or step.step % 10 == 0 or status.step_index + 1 == status.step_count
+                or status.step_index in clipped):
             online = "-" if status.online_error_deg is None else f"{status.online_error_deg:.2f}"
             ref = "-" if status.ref_error_deg is None else f"{status.ref_error_deg:.2f}"
-            console.print(f"step {status.step_index + 1}/{status.step_count} {status.phase}: tip error ref {ref} deg, "
+            flag = " (clipped to the valves' limit)" if status.step_index in clipped else ""
+            console.print(f"step {status.step_index + 1}/{status.step_count} {status.phase}{flag}: tip error ref {ref} deg, "
                           f"online {online} deg; EM {status.em_frames} frames, IMU {status.imu_samples} samples",
                           highlight=False, markup=False)
 
