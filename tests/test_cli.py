@@ -149,3 +149,15 @@ def test_a_misspelt_table_in_the_shipped_profile_stops_run_before_anything_runs(
                                       "--log", str(tmp_path / "x.mcap")])
     assert message.startswith(f"{profile}: {table} is not a known key; did you mean {proper}?"), message
     assert not (tmp_path / "x.mcap").exists()
+
+
+def test_a_twin_without_equilibrium_stops_run_with_one_line_naming_the_profile(tmp_path, capsys):
+    profile = tmp_path / "soft.toml"
+    profile.write_text(SIM_PROFILE.replace("youngs_modulus_base_pa = 3.0e5", "youngs_modulus_base_pa = 1.0e3")
+                       .replace("youngs_modulus_tip_pa = 2.0e5", "youngs_modulus_tip_pa = 1.0e3"))
+    plan = tmp_path / "plan.toml"
+    plan.write_text(TWO_STEPS)
+    message = one_line_error(capsys, ["run", "--profile", str(profile), "--plan", str(plan), "--no-live",
+                                      "--time-scale", "20", "--log", str(tmp_path / "x.mcap")])
+    assert message.startswith("cosserat model did not converge"), message
+    assert message.endswith(f"check the parameters and forces in {profile}, {plan}"), message

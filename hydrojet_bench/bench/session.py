@@ -189,7 +189,8 @@ class Session:
             except Exception as error:
                 cause = _first_leaf(error)
                 self.event("error", "session", f"stopped: {type(cause).__name__}: {cause}")
-                if isinstance(cause, UserError):
+                # A twin with no equilibrium for the profile's rod is the user's inputs too.
+                if isinstance(cause, (UserError, ConvergenceError)):
                     raise cause from error
                 if isinstance(cause, DEVICE_ERRORS):
                     raise SessionAborted(f"device failure: {cause}") from error
