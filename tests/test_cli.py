@@ -9,8 +9,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rich.console import Console
 
 from hydrojet_bench.cli import COMMAND_MODULES, main
+from hydrojet_bench.commands import render
 from hydrojet_bench.config.loading import PROFILES_DIR
 from hydrojet_bench.logs import read_log
 
@@ -161,3 +163,9 @@ def test_a_twin_without_equilibrium_stops_run_with_one_line_naming_the_profile(t
                                       "--time-scale", "20", "--log", str(tmp_path / "x.mcap")])
     assert message.startswith("cosserat model did not converge"), message
     assert message.endswith(f"check the parameters and forces in {profile}, {plan}"), message
+
+
+def test_table_titles_show_file_names_as_written():
+    console = Console(record=True, width=100)
+    console.print(render.table("cosserat calibrated on 40 poses of [bold]x[/x].csv", labels=("a",), numbers=("b",)))
+    assert "poses of [bold]x[/x].csv" in console.export_text()
