@@ -168,4 +168,4 @@ def test_a_twin_without_equilibrium_stops_run_with_one_line_naming_the_profile(t
 def test_table_titles_show_file_names_as_written():
     console = Console(record=True, width=100)
     console.print(render.table("cosserat calibrated on 40 poses of [bold]x[/x].csv", labels=("a",), numbers=("b",)))
-    assert "poses of [bold]x[/x].csv" in console.export_text()
+    assert "posesof[bold]x[/x].csv" in "".join(console.export_text().split())  # the title wraps to the table
