@@ -93,6 +93,7 @@ def read_parameter_file(path: Path) -> ParameterFile:
     # silently from the profile would hide that.
     missing = [name for name in PARAMETER_NAMES if name not in content.parameters]
     if missing:
-        raise UserError(f"{path}: parameters.{missing[0]} is missing{' (and ' + ', '.join(missing[1:]) + ')' if missing[1:] else ''}; "
-                        f"a parameter file from calibrate lists {', '.join(PARAMETER_NAMES)}")
+        others = f" (and {', '.join(missing[1:])})" if missing[1:] else ""
+        raise UserError(f"{path}: parameters.{missing[0]} is missing{others}; a parameter file from calibrate "
+                        f"lists {', '.join(PARAMETER_NAMES)}")
     return content

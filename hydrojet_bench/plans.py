@@ -146,7 +146,8 @@ class Plan:
             forces = np.minimum(step.jet_forces_n, limits)
             if np.any(forces < step.jet_forces_n):
                 changed.append(index)
-                step = PlanStep(tuple(float(f) for f in forces), step.sweep, step.step, step.settle_s)  # type: ignore[arg-type]
+                limited = tuple(float(f) for f in forces)
+                step = PlanStep(limited, step.sweep, step.step, step.settle_s)  # type: ignore[arg-type]
             steps.append(step)
         return Plan(tuple(steps)), tuple(changed)
 
@@ -293,8 +294,9 @@ def plan_from_rows(rows: list[dict[str, object]], source: str, default_settle_s:
             sweep = _cell_integer(row.get("sweep", 0), "sweep")
             step = _cell_integer(row.get("step", counters.get(sweep, 0)), "step")
             counters[sweep] = step + 1
-            steps.append(PlanStep(tuple(_cell_number(row[key], key) for key in ("q1", "q2", "q3")),  # type: ignore[arg-type]
-                                  sweep, step, _cell_number(row.get("settle_s", default_settle_s), "settle_s")))
+            forces = tuple(_cell_number(row[key], key) for key in ("q1", "q2", "q3"))
+            settle_s = _cell_number(row.get("settle_s", default_settle_s), "settle_s")
+            steps.append(PlanStep(forces, sweep, step, settle_s))  # type: ignore[arg-type]
         except (TypeError, ValueError) as error:
             raise ValueError(f"{source}, row {number}: {error}") from None
     if not steps:

@@ -55,7 +55,8 @@ def test_user_mistakes_are_one_line_without_traceback(tmp_path):
 
 
 SIM_PROFILE = (PROFILES_DIR / "sim.toml").read_text()
-TWO_STEPS = "[[step]]\nq1 = 0.05\nq2 = 0.0\nq3 = 0.0\nsettle_s = 0.5\n[[step]]\nq1 = 0.0\nq2 = 0.05\nq3 = 0.0\nsettle_s = 0.5\n"
+TWO_STEPS = ("[[step]]\nq1 = 0.05\nq2 = 0.0\nq3 = 0.0\nsettle_s = 0.5\n"
+             "[[step]]\nq1 = 0.0\nq2 = 0.05\nq3 = 0.0\nsettle_s = 0.5\n")
 
 
 def one_line_error(capsys, argv: list[str]) -> str:

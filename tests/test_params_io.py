@@ -19,7 +19,8 @@ NOMINAL_TEXT = "".join(f"{name} = {value!r}\n" for name, value in NOMINAL.items(
 
 def test_a_written_file_reads_back(tmp_path: Path) -> None:
     written = ParameterFile(model="cosserat", effects=("gravity",),
-                            parameters={**NOMINAL, "E0": 2.9e5, "gravity.weight_scale": 1.1}, standard_errors={"E0": 1e3},
+                            parameters={**NOMINAL, "E0": 2.9e5, "gravity.weight_scale": 1.1},
+                            standard_errors={"E0": 1e3},
                             calibration={"data": "run.csv", "poses": 40})
     write_parameter_file(tmp_path / "p.toml", written)
     read = read_parameter_file(tmp_path / "p.toml")

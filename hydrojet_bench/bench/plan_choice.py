@@ -1,7 +1,8 @@
 """Which plan a session plays: a built-in by name, or a plan file.
 
 Built-ins: ``paper`` (40 calibration poses + the nine sweeps, 229 steps), ``calibration``
-or ``calibration:COUNT`` (the 40 poses, or COUNT of them), ``sweeps`` (the nine sweeps), ``imu-vs-em`` (static poses and slow
+or ``calibration:COUNT`` (the 40 poses, or COUNT of them), ``sweeps`` (the nine sweeps),
+``imu-vs-em`` (static poses and slow
 ramps), ``hold`` or ``hold:SECONDS`` (jets off, held).
 
 Plan files list force steps, one per row, with columns (CSV header) or keys (TOML

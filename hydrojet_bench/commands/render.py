@@ -35,7 +35,8 @@ def plain(value: object) -> str:
 
 
 def table(title: str, labels: Sequence[str], numbers: Sequence[str], caption: str | None = None) -> Table:
-    """A table (its title printed as written, no markup) whose label columns (left-aligned, never wrapped) come before its number
+    """A table (its title printed as written, no markup) whose label columns
+    (left-aligned, never wrapped) come before its number
     columns (right-aligned)."""
     result = Table(title=plain(title), caption=caption)
     for header in labels:

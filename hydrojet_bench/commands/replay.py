@@ -55,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
     online = OnlineSettings() if args.online else None
     estimates = replay(session, model, online, params)
     if session.truncated:
-        console.print(f"[yellow]{render.plain(args.input)} is truncated: replaying the {len(session.steps)} steps before the cut[/]")
+        console.print(f"[yellow]{render.plain(args.input)} is truncated: replaying the {len(session.steps)} "
+                      "steps before the cut[/]")
     kept = [i for i, estimate in enumerate(estimates) if estimate is not None]
     validation = [i for i in kept if session.steps.sweep[i] >= 0] or kept
     if not validation:

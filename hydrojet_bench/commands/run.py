@@ -84,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
                              seed=args.seed, warnings=(clipped_warning,) if clipped_warning else (),
                              command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]))
     console = render.console_for(args)
-    console.print(f"session on [bold]{render.plain(profile.name)}[/] ({'simulated rig' if settings.transports.simulated else 'rig'}): "
+    rig = "simulated rig" if settings.transports.simulated else "rig"
+    console.print(f"session on [bold]{render.plain(profile.name)}[/] ({rig}): "
                   f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.session.time_scale:g}, "
                   f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; "
                   f"log {render.plain(log_path)}", highlight=False)
@@ -153,7 +154,8 @@ def _printer(console: Console, clipped: frozenset[int]):
             online = "-" if status.online_error_deg is None else f"{status.online_error_deg:.2f}"
             ref = "-" if status.ref_error_deg is None else f"{status.ref_error_deg:.2f}"
             flag = " (clipped to the valves' limit)" if status.step_index in clipped else ""
-            console.print(f"step {status.step_index + 1}/{status.step_count} {status.phase}{flag}: tip error ref {ref} deg, "
+            console.print(f"step {status.step_index + 1}/{status.step_count} {status.phase}{flag}: "
+                          f"tip error ref {ref} deg, "
                           f"online {online} deg; EM {status.em_frames} frames, IMU {status.imu_samples} samples",
                           highlight=False, markup=False)
 
