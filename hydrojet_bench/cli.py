@@ -14,9 +14,10 @@ import importlib
 import sys
 
 from rich.console import Console
+from rich.markup import escape
 
 from . import __version__
-from .errors import UserError
+from .errors import ConvergenceError, UserError
 
 # Order is the order shown in --help.
 COMMAND_MODULES = ("run", "replay", "sensors", "simulate", "calibrate", "compare", "diagnose",
@@ -44,11 +45,29 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except UserError as error:
-        Console(stderr=True).print(f"[bold red]error:[/] {error}", highlight=False, soft_wrap=True)
+        _print_error(str(error))
+        return 2
+    except ConvergenceError as error:
+        # Parameters or forces the rod cannot carry (a tip load that buckles it, a huge
+        # jet force): the user's inputs, not a bug, so one line naming them.
+        _print_error(f"{error}; check the parameters and forces in {_input_files(args)}")
         return 2
     except KeyboardInterrupt:
         Console(stderr=True).print("interrupted")
         return 130
+
+
+def _input_files(args: argparse.Namespace) -> str:
+    files = [str(value) for option in ("params", "baseline", "profile", "plan", "input")
+             if (value := getattr(args, option, None)) is not None]
+    effect_files = [spec for option in ("effect", "hidden") for spec in getattr(args, option, None) or ()
+                    if ":" in spec]
+    return ", ".join(effect_files + files) or "the command's inputs"
+
+
+def _print_error(message: str) -> None:
+    # The message quotes the user's file names, keys and cells: escaped, "[rod]" stays "[rod]".
+    Console(stderr=True).print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
 
 
 if __name__ == "__main__":

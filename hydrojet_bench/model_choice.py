@@ -25,10 +25,12 @@ from .params_io import ParameterFile, read_parameter_file
 @dataclass(frozen=True)
 class ModelDefaults:
     """What a command runs when neither a parameter file nor ``--model`` says: a model
-    name and effect specs (library names or path/to/file.py:Class)."""
+    name and effect specs (library names or path/to/file.py:Class); ``origin`` names
+    where they were read (a profile's ``[estimator]``), for errors."""
 
     model: str
     effects: tuple[str, ...] = ()
+    origin: str = ""
 
 
 # The default of the commands that have no profile or session log to ask.
@@ -81,7 +83,13 @@ def choose_model(model: str | None, effects: Sequence[str], parameter_path: Path
         name, base_specs = model or parameter_file.model, _file_effect_specs(
             parameter_file, parameter_path, effects if effect_files is None else effect_files)
     specs = tuple(dict.fromkeys([*base_specs, *effects]))
-    built, requested = build_model(name, specs)
+    if parameter_path is None and defaults.origin:
+        try:
+            built, requested = build_model(name, specs)
+        except UserError as error:
+            raise UserError(f"{defaults.origin}: {error}") from None
+    else:
+        built, requested = build_model(name, specs)
     return ModelChoice(built, requested, specs, parameter_file, parameter_path)
 
 

@@ -24,6 +24,10 @@ Vector3 = tuple[float, float, float]
 # The HydroJet capsule carries three water jets (paper eq. 5); every per-jet tuple has
 # this length.
 JET_COUNT = 3
+# The most a jet of the capsule plausibly pushes, N: the paper's jets give ~0.1 N, and
+# beyond ~10 N the nominal rod has no static equilibrium the models can find (measured:
+# 10 N on one jet converges, 20 N does not). A larger limit in a file is a typo.
+MAX_PLAUSIBLE_JET_FORCE_N = 10.0
 
 
 def _check_finite(owner: str, name: str, value: float) -> None:
@@ -209,6 +213,26 @@ _CORE_PARAMETERS: dict[str, tuple[str, str, int | None]] = {
     "wd_mz": ("disturbance", "moment_nm", 2),
 }
 PARAMETER_NAMES: tuple[str, ...] = tuple(_CORE_PARAMETERS)
+
+# Plausible values (low, high, unit) of the flat-named parameters when they come from a
+# file: outside them is a unit slip (MPa written for Pa, mm for m) or a typo, not a soft
+# continuum robot, and the model would fail or answer nonsense.
+_FORCE_RANGE = (-10.0, 10.0, "N")
+_MOMENT_RANGE = (-1.0, 1.0, "N m")
+PLAUSIBLE_RANGES: dict[str, tuple[float, float, str]] = {
+    "E0": (1e3, 1e9, "Pa"), "EL": (1e3, 1e9, "Pa"), "L": (0.005, 1.0, "m"),
+    "wd_fx": _FORCE_RANGE, "wd_fy": _FORCE_RANGE, "wd_fz": _FORCE_RANGE,
+    "wd_mx": _MOMENT_RANGE, "wd_my": _MOMENT_RANGE, "wd_mz": _MOMENT_RANGE,
+}
+
+
+def check_plausible(name: str, value: float, field_name: str | None = None) -> None:
+    """ValueError naming ``field_name`` (default: the flat ``name``), the value and the
+    unit when ``value`` is outside ``PLAUSIBLE_RANGES[name]``."""
+    low, high, unit = PLAUSIBLE_RANGES[name]
+    if not low <= value <= high:
+        raise ValueError(f"{field_name or name} = {value:g} {unit} is outside the plausible range "
+                         f"{low:g} .. {high:g} {unit} (a unit slip?)")
 DISTURBANCE_MOMENT_NAMES: tuple[str, ...] = ("wd_mx", "wd_my", "wd_mz")
 DISTURBANCE_NAMES: tuple[str, ...] = ("wd_fx", "wd_fy", "wd_fz") + DISTURBANCE_MOMENT_NAMES
 

@@ -25,7 +25,7 @@ import msgspec
 from .config.loading import convert, read_toml
 from .config.schema import Finite
 from .errors import UserError
-from .params import ModelParameters, with_parameters
+from .params import PARAMETER_NAMES, PLAUSIBLE_RANGES, ModelParameters, check_plausible, with_parameters
 
 
 class ParameterFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
@@ -40,6 +40,9 @@ class ParameterFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_
     def __post_init__(self) -> None:
         if not self.parameters:
             raise ValueError("parameters is missing or empty")
+        for name, value in self.parameters.items():
+            if name in PLAUSIBLE_RANGES:
+                check_plausible(name, value, f"parameters.{name}")
 
     def apply(self, params: ModelParameters, source: Path | str = "parameters") -> ModelParameters:
         """``params`` with these values; an invalid value is a UserError naming the key."""
@@ -85,4 +88,12 @@ def write_parameter_file(path: Path, content: ParameterFile) -> None:
 
 def read_parameter_file(path: Path) -> ParameterFile:
     """Read and check a parameter file; problems are UserErrors naming the file and key."""
-    return convert(read_toml(path, what="parameter file"), ParameterFile, str(path))
+    content = convert(read_toml(path, what="parameter file"), ParameterFile, str(path))
+    # `calibrate` always fits these: a file without one was edited, and completing it
+    # silently from the profile would hide that.
+    missing = [name for name in PARAMETER_NAMES if name not in content.parameters]
+    if missing:
+        others = f" (and {', '.join(missing[1:])})" if missing[1:] else ""
+        raise UserError(f"{path}: parameters.{missing[0]} is missing{others}; a parameter file from calibrate "
+                        f"lists {', '.join(PARAMETER_NAMES)}")
+    return content

@@ -137,6 +137,20 @@ class Plan:
         """Total time the plan takes to play, s."""
         return float(sum(s.settle_s for s in self.steps))
 
+    def clipped(self, max_force_per_jet_n: tuple[float, float, float]) -> tuple["Plan", tuple[int, ...]]:
+        """This plan with every force above its jet's limit (N) lowered to the limit, as
+        the valves apply it, and the indices of the steps that changed."""
+        limits = np.asarray(max_force_per_jet_n, dtype=float)
+        steps, changed = [], []
+        for index, step in enumerate(self.steps):
+            forces = np.minimum(step.jet_forces_n, limits)
+            if np.any(forces < step.jet_forces_n):
+                changed.append(index)
+                limited = tuple(float(f) for f in forces)
+                step = PlanStep(limited, step.sweep, step.step, step.settle_s)  # type: ignore[arg-type]
+            steps.append(step)
+        return Plan(tuple(steps)), tuple(changed)
+
 
 def _resultant_to_jets(resultant_xy_n: np.ndarray) -> np.ndarray:
     """Non-negative jet forces whose resultant (eq. 5, ring angle 0) is the given tip-frame
@@ -243,6 +257,26 @@ def hold_plan(jet_forces_n: tuple[float, float, float] = (0.0, 0.0, 0.0), durati
     return Plan((PlanStep(jet_forces_n, 0, 0, duration_s),))
 
 
+def _cell_number(value: object, key: str) -> float:
+    """A plan cell as a number: a TOML number, or CSV text in plain decimal notation
+    (``1_000``, which Python's float() reads as 1000, is refused as a likely typo)."""
+    if isinstance(value, str) and "_" not in value:
+        try:
+            return float(value)
+        except ValueError:
+            pass
+    elif _is_int(value) or isinstance(value, (float, np.floating)):
+        return float(value)  # type: ignore[arg-type]
+    raise ValueError(f"{key} must be a number, got {value!r}")
+
+
+def _cell_integer(value: object, key: str) -> int:
+    number = _cell_number(value, key)
+    if not number.is_integer():
+        raise ValueError(f"{key} must be an integer, got {value!r}")
+    return int(number)
+
+
 def plan_from_rows(rows: list[dict[str, object]], source: str, default_settle_s: float = DEFAULT_SETTLE_S) -> Plan:
     """A plan from table rows with keys q1, q2, q3 (N), and optionally settle_s (s), sweep
     and step; ``source`` names the file in errors ("plan.csv, row 3: ...")."""
@@ -257,11 +291,12 @@ def plan_from_rows(rows: list[dict[str, object]], source: str, default_settle_s:
         if missing:
             raise ValueError(f"{source}, row {number}: missing {', '.join(missing)} (jet forces, N)")
         try:
-            sweep = int(row.get("sweep", 0))  # type: ignore[arg-type]
-            step = int(row.get("step", counters.get(sweep, 0)))  # type: ignore[arg-type]
+            sweep = _cell_integer(row.get("sweep", 0), "sweep")
+            step = _cell_integer(row.get("step", counters.get(sweep, 0)), "step")
             counters[sweep] = step + 1
-            steps.append(PlanStep(tuple(float(row[key]) for key in ("q1", "q2", "q3")),  # type: ignore[arg-type]
-                                  sweep, step, float(row.get("settle_s", default_settle_s))))  # type: ignore[arg-type]
+            forces = tuple(_cell_number(row[key], key) for key in ("q1", "q2", "q3"))
+            settle_s = _cell_number(row.get("settle_s", default_settle_s), "settle_s")
+            steps.append(PlanStep(forces, sweep, step, settle_s))  # type: ignore[arg-type]
         except (TypeError, ValueError) as error:
             raise ValueError(f"{source}, row {number}: {error}") from None
     if not steps:

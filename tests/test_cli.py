@@ -5,8 +5,16 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rich.console import Console
 
 from hydrojet_bench.cli import COMMAND_MODULES, main
+from hydrojet_bench.commands import render
+from hydrojet_bench.config.loading import PROFILES_DIR
+from hydrojet_bench.logs import read_log
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
@@ -45,3 +53,121 @@ def test_user_mistakes_are_one_line_without_traceback(tmp_path):
         assert result.returncode == 2, args
         assert message in result.stderr
         assert "Traceback" not in result.stderr
+
+
+SIM_PROFILE = (PROFILES_DIR / "sim.toml").read_text()
+TWO_STEPS = ("[[step]]\nq1 = 0.05\nq2 = 0.0\nq3 = 0.0\nsettle_s = 0.5\n"
+             "[[step]]\nq1 = 0.0\nq2 = 0.05\nq3 = 0.0\nsettle_s = 0.5\n")
+
+
+def one_line_error(capsys, argv: list[str]) -> str:
+    """The message of a command that must fail as a user's mistake: exit 2, one line."""
+    assert main(argv) == 2, argv
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1, err
+    return err[len("error: "):].rstrip("\n")
+
+
+@pytest.mark.parametrize("name", ["[bold]x.csv", "[/x].csv", "[red]"])
+def test_file_names_with_markup_are_printed_as_written(tmp_path, capsys, name):
+    path = tmp_path / name
+    message = one_line_error(capsys, ["calibrate", str(path), "-o", str(tmp_path / "p.toml")])
+    assert message.startswith(f"{path}"), message
+
+
+def test_table_names_in_messages_keep_their_brackets(tmp_path, capsys):
+    profile = tmp_path / "rig.toml"
+    profile.write_text(SIM_PROFILE.replace("length_m = 0.070", "lenght_m = 0.070"))
+    message = one_line_error(capsys, ["run", "--profile", str(profile), "--plan", "calibration"])
+    assert "rod.lenght_m is not a known key; did you mean length_m? ([rod] takes length_m," in message
+
+
+@pytest.mark.parametrize(("options", "expected"), [
+    (["--seed", "-1"], "--seed must be an integer >= 0, got -1"),
+    (["--time-scale", "1e9"], "--time-scale must be > 0 and at most 1000"),
+    (["--time-scale", "inf"], "--time-scale must be > 0 and at most 1000"),
+])
+def test_run_options_are_blamed_not_the_profile(tmp_path, capsys, options, expected):
+    message = one_line_error(capsys, ["run", "--plan", "calibration", "--log", str(tmp_path / "x.mcap"), *options])
+    assert message.startswith(expected), message
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def test_simulate_blames_a_negative_seed(tmp_path, capsys):
+    message = one_line_error(capsys, ["simulate", "-o", str(tmp_path / "x.csv"), "--seed", "-1"])
+    assert message == "--seed must be an integer >= 0, got -1"
+
+
+def test_a_missing_estimator_effect_names_the_profile(tmp_path, capsys):
+    profile = tmp_path / "rig.toml"
+    profile.write_text(SIM_PROFILE + '\n[estimator]\neffects = ["clogged.py:Clogged"]\n')
+    message = one_line_error(capsys, ["run", "--profile", str(profile), "--plan", "calibration",
+                                      "--log", str(tmp_path / "x.mcap")])
+    assert message.startswith(f"{profile} (estimator.effects): effect 'clogged.py:Clogged': file clogged.py does not "
+                              "exist"), message
+
+
+@pytest.mark.skipif(Path("/dev/i2c-1").exists(), reason="this machine has an I2C bus 1")
+def test_the_physical_rig_profile_without_its_i2c_bus_is_one_line(tmp_path, capsys):
+    plan = tmp_path / "plan.toml"
+    plan.write_text(TWO_STEPS)
+    message = one_line_error(capsys, ["run", "--profile", "hydrojet-v1", "--plan", str(plan), "--no-live",
+                                      "--log", str(tmp_path / "x.mcap")])
+    assert message.endswith("hydrojet-v1.toml: transports.imu_bus = 1: cannot open /dev/i2c-1: No such file or "
+                            "directory (is this the rig's PC? imu_bus = \"sim\" emulates the IMUs)"), message
+
+
+def test_calibrate_without_calibration_poses_says_so(tmp_path, capsys):
+    data = tmp_path / "sweeps.csv"
+    data.write_text("t,q1,q2,q3,base_qw,base_qx,base_qy,base_qz,tip_qw,tip_qx,tip_qy,tip_qz,sweep\n"
+                    "0.0,0.05,0,0,0,1,0,0,0,1,0,0,0\n")
+    message = one_line_error(capsys, ["calibrate", str(data), "-o", str(tmp_path / "p.toml")])
+    assert message.startswith(f"{data}: no calibration poses (steps of sweep -1) to fit on"), message
+
+
+def test_a_step_above_the_valves_limit_is_predicted_at_the_clipped_force_with_a_warning(tmp_path, capsys):
+    plan = tmp_path / "plan.csv"
+    plan.write_text("q1,q2,q3,settle_s\n0.3,0,0,5\n")
+    assert main(["run", "--plan", str(plan), "--no-live", "--time-scale", "20", "--no-calibration",
+                 "--log", str(tmp_path / "x.mcap")]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    warning = "1 step(s) of the plan (1) ask more than the valves give (0.15, 0.15, 0.15 N per jet)"
+    assert f"warning: {warning}" in out
+    assert "step 1/1 sweep 0 (clipped to the valves' limit): tip error ref" in out
+    events = read_log(tmp_path / "x.mcap", topics=["/events"]).messages
+    assert any(e.level == "warning" and e.message.startswith(warning) for e in events)
+    commands = [m.jet_forces_n for m in read_log(tmp_path / "x.mcap", topics=["/valves/command"]).messages]
+    assert (0.15, 0.0, 0.0) in [tuple(c) for c in commands] and max(max(c) for c in commands) == 0.15
+    (step,) = read_log(tmp_path / "x.mcap", topics=["/bench/step"]).messages
+    np.testing.assert_allclose(step.jet_forces_n, (0.15, 0.0, 0.0), atol=1e-12)
+    (prediction, *_) = read_log(tmp_path / "x.mcap", topics=["/model/prediction"]).messages
+    assert prediction.orientation_error_deg < 5.0  # at 0.3 N the prediction was 24.7 deg off
+
+
+@pytest.mark.parametrize("table", ["transport", "sesion", "valve", "rood"])
+def test_a_misspelt_table_in_the_shipped_profile_stops_run_before_anything_runs(tmp_path, capsys, table):
+    proper = {"transport": "transports", "sesion": "session", "valve": "valves", "rood": "rod"}[table]
+    profile = tmp_path / "hydrojet-v1.toml"
+    profile.write_text((PROFILES_DIR / "hydrojet-v1.toml").read_text().replace(f"[{proper}]", f"[{table}]"))
+    message = one_line_error(capsys, ["run", "--profile", str(profile), "--plan", "calibration",
+                                      "--log", str(tmp_path / "x.mcap")])
+    assert message.startswith(f"{profile}: {table} is not a known key; did you mean {proper}?"), message
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def test_a_twin_without_equilibrium_stops_run_with_one_line_naming_the_profile(tmp_path, capsys):
+    profile = tmp_path / "soft.toml"
+    profile.write_text(SIM_PROFILE.replace("youngs_modulus_base_pa = 3.0e5", "youngs_modulus_base_pa = 1.0e3")
+                       .replace("youngs_modulus_tip_pa = 2.0e5", "youngs_modulus_tip_pa = 1.0e3"))
+    plan = tmp_path / "plan.toml"
+    plan.write_text(TWO_STEPS)
+    message = one_line_error(capsys, ["run", "--profile", str(profile), "--plan", str(plan), "--no-live",
+                                      "--time-scale", "20", "--log", str(tmp_path / "x.mcap")])
+    assert message.startswith("cosserat model did not converge"), message
+    assert message.endswith(f"check the parameters and forces in {profile}, {plan}"), message
+
+
+def test_table_titles_show_file_names_as_written():
+    console = Console(record=True, width=100)
+    console.print(render.table("cosserat calibrated on 40 poses of [bold]x[/x].csv", labels=("a",), numbers=("b",)))
+    assert "posesof[bold]x[/x].csv" in "".join(console.export_text().split())  # the title wraps to the table

@@ -8,13 +8,19 @@ from pathlib import Path
 import pytest
 
 from hydrojet_bench.errors import UserError
-from hydrojet_bench.params import ModelParameters
+from hydrojet_bench.params import PARAMETER_NAMES, ModelParameters, get_parameter
 from hydrojet_bench.params_io import ParameterFile, read_parameter_file, write_parameter_file
+
+
+# What calibrate fits, at the nominal values.
+NOMINAL = {name: get_parameter(ModelParameters(), name) for name in PARAMETER_NAMES}
+NOMINAL_TEXT = "".join(f"{name} = {value!r}\n" for name, value in NOMINAL.items())
 
 
 def test_a_written_file_reads_back(tmp_path: Path) -> None:
     written = ParameterFile(model="cosserat", effects=("gravity",),
-                            parameters={"E0": 2.9e5, "gravity.weight_scale": 1.1}, standard_errors={"E0": 1e3},
+                            parameters={**NOMINAL, "E0": 2.9e5, "gravity.weight_scale": 1.1},
+                            standard_errors={"E0": 1e3},
                             calibration={"data": "run.csv", "poses": 40})
     write_parameter_file(tmp_path / "p.toml", written)
     read = read_parameter_file(tmp_path / "p.toml")
@@ -37,6 +43,30 @@ def test_mistakes_name_file_and_key(tmp_path: Path, text: str, message: str) -> 
     with pytest.raises(UserError) as info:
         read_parameter_file(path)
     assert str(info.value).startswith(f"{path}: {message}"), str(info.value)
+
+
+@pytest.mark.parametrize(("name", "value", "message"), [
+    ("E0", 0.3, "parameters.E0 = 0.3 Pa is outside the plausible range 1000 .. 1e+09 Pa"),
+    ("EL", 1e30, "parameters.EL = 1e+30 Pa is outside the plausible range"),
+    ("L", 7.0, "parameters.L = 7 m is outside the plausible range 0.005 .. 1 m"),
+    ("L", 70.0, "parameters.L = 70 m is outside"),
+    ("wd_fx", 50.0, "parameters.wd_fx = 50 N is outside"),
+])
+def test_implausible_values_name_the_field_and_the_unit(tmp_path: Path, name: str, value: float,
+                                                        message: str) -> None:
+    path = tmp_path / "p.toml"
+    path.write_text('model = "cosserat"\n[parameters]\n' + NOMINAL_TEXT.replace(f"{name} = {NOMINAL[name]!r}",
+                                                                                f"{name} = {value!r}"))
+    with pytest.raises(UserError) as info:
+        read_parameter_file(path)
+    assert str(info.value).startswith(f"{path}: {message}"), str(info.value)
+
+
+def test_a_missing_fitted_parameter_is_named_not_taken_from_the_profile(tmp_path: Path) -> None:
+    path = tmp_path / "p.toml"
+    path.write_text('model = "cosserat"\n[parameters]\n' + NOMINAL_TEXT.replace(f"E0 = {NOMINAL['E0']!r}\n", ""))
+    with pytest.raises(UserError, match=rf"^{path}: parameters\.E0 is missing; a parameter file from calibrate"):
+        read_parameter_file(path)
 
 
 def test_a_missing_file_is_named(tmp_path: Path) -> None:

@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from hydrojet_bench.bench.plan_choice import choose_plan
+from hydrojet_bench.errors import UserError
 from hydrojet_bench.params import actuation_matrix
 from hydrojet_bench.plans import (CALIBRATION_SWEEP, DEFAULT_MAX_FORCE_N, Plan, PlanStep, _resultant_to_jets,
                                   calibration_plan, paper_protocol, validation_sweeps)
@@ -128,3 +130,42 @@ def test_plan_holds_only_steps_and_steps_are_frozen():
     assert step.jet_forces_n == (0.01, 0.0, 0.0)
     with pytest.raises(AttributeError):
         step.sweep = 3  # type: ignore[misc]
+
+
+def test_steps_above_the_valves_limits_are_clipped_to_them_and_listed():
+    plan = Plan((PlanStep((0.05, 0.0, 0.0), 0, 0), PlanStep((0.3, 0.0, 5.0), 0, 1), PlanStep((0.0, 0.2, 0.0), 0, 2)))
+    clipped, changed = plan.clipped((0.15, 0.15, 0.15))
+    assert changed == (1, 2)
+    np.testing.assert_allclose(clipped.jet_forces_n, [[0.05, 0.0, 0.0], [0.15, 0.0, 0.15], [0.0, 0.15, 0.0]])
+    assert [(s.sweep, s.step, s.settle_s) for s in clipped] == [(s.sweep, s.step, s.settle_s) for s in plan]
+    assert plan.clipped((5.0, 5.0, 5.0)) == (plan, ())
+
+
+@pytest.mark.parametrize(("spec", "steps"), [("calibration", 40), ("calibration:5", 5), ("hold:2", 1)])
+def test_built_in_plans_honour_their_argument(spec, steps):
+    assert len(choose_plan(spec)) == steps
+
+
+@pytest.mark.parametrize(("spec", "message"), [
+    ("calibration:five", "calibration:COUNT takes a whole number of poses >= 1"),
+    ("calibration:0", "calibration:COUNT takes a whole number"),
+    ("paper:3", "paper takes no argument"),
+    ("sweeps:2", "sweeps takes no argument"),
+])
+def test_a_built_in_plans_argument_is_never_ignored(spec, message):
+    with pytest.raises(UserError, match=message):
+        choose_plan(spec)
+
+
+@pytest.mark.parametrize(("name", "content", "message"), [
+    ("plan.csv", "q1,q2,q3\n0.05,0,0\n1_000,0,0\n", r"plan.csv, row 2: q1 must be a number, got '1_000'"),
+    ("plan.csv", "q1,q2,q3,sweep\n0.05,0,0,1.5\n", r"plan.csv, row 1: sweep must be an integer, got '1.5'"),
+    ("plan.toml", "[[step]]\nq1 = true\nq2 = 0\nq3 = 0\n", r"plan.toml, row 1: q1 must be a number, got True"),
+    ("plan.csv", "q1,q2,q3\n0.05,0,0\n# caf\xe9\n", r"plan.csv: not UTF-8 text \(byte \d+\)"),
+    ("plan.toml", "# caf\xe9\n[[step]]\nq1 = 0\nq2 = 0\nq3 = 0\n", r"plan.toml: not UTF-8 text \(byte \d+\)"),
+])
+def test_plan_file_mistakes_name_the_file_and_row(tmp_path, name, content, message):
+    path = tmp_path / name
+    path.write_bytes(content.encode("latin-1"))
+    with pytest.raises(UserError, match=message):
+        choose_plan(str(path))

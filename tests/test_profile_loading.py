@@ -167,6 +167,15 @@ def test_the_shipped_physical_rig_with_a_misspelt_table_does_not_load(tmp_path: 
 @pytest.mark.parametrize(("text", "key", "expected"), [
     ("[session]\nsettle_s = 1.0\nwindow_s = 2.0\n", "session.window_s", "must not exceed session.settle_s"),
     ('[transports]\nvalves = "COM3"\n', "transports.valves", 'must be "sim", "pty" or a transport URL'),
+    ('[transports]\nvalves = "tcp://10.0.0.2:5000"\n', "transports.valves",
+     "is not a usable transport URL: unsupported transport scheme 'tcp'"),
+    ('[transports]\ntracker = "serial:///dev/ttyUSB1?baud=fast"\n', "transports.tracker",
+     "baud must be a positive integer, got 'fast'"),
+    ("[rod]\nyoungs_modulus_base_pa = 0.3\n", "rod.youngs_modulus_base_pa",
+     "= 0.3 Pa is outside the plausible range 1000 .. 1e+09 Pa"),
+    ("[rod]\nlength_m = 70.0\n", "rod.length_m", "= 70 m is outside the plausible range 0.005 .. 1 m"),
+    ("[jets]\nmax_force_n = 100.0\n", "jets.max_force_n", "= 100 N is outside the plausible range 0 .. 10 N"),
+    ("[session]\ntime_scale = 1e9\n", "session.time_scale", "<= 1000"),
     ("[transports]\nimu_bus = -1\n", "transports.imu_bus", "I2C bus number"),
     ('[tracker]\ntools = ["base", "base"]\n', "tracker.tools", 'each of "base" and "tip" once'),
     ("[imu]\nbase_address = 0x69\n", "imu.tip_address", "must differ from imu.base_address"),
@@ -289,3 +298,10 @@ def test_sim_profile_sensor_poses_round_trip_through_mountings() -> None:
     np.testing.assert_allclose(poses.base_position_m, [0.012, 0.0, clamp_z + 0.008], atol=1e-12)
     np.testing.assert_allclose(profile.clamp_orientation_in_tracker(poses.base_orientation),
                                profile.base_orientation_in_tracker, atol=1e-12)
+
+
+def test_a_profile_that_is_not_utf8_is_one_line_naming_it(tmp_path: Path) -> None:
+    path = tmp_path / "latin1.toml"
+    path.write_bytes(MINIMAL.encode() + "# réglé\n".encode("latin-1"))
+    with pytest.raises(UserError, match=rf"^{path}: not UTF-8 text \(byte \d+\); save it as UTF-8$"):
+        load_profile(path)

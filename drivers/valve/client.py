@@ -314,8 +314,8 @@ class ValveController:
             if last_nak is not None:
                 raise ValveNakError(last_nak.code, last_nak.command)
             raise ValveTimeoutError(
-                f"no reply to {Command(frame.command).name} after {self.retries + 1} attempts "
-                f"of {self.reply_timeout_s} s"
+                f"no reply to {Command(frame.command).name} on {self.transport.url} after "
+                f"{self.retries + 1} attempts of {self.reply_timeout_s} s"
             )
 
     async def _read_loop(self) -> None:

@@ -8,6 +8,7 @@ import time
 
 from rich.console import Console, Group
 from rich.live import Live
+from rich.markup import escape
 from rich.panel import Panel
 from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn
 from rich.table import Table
@@ -65,5 +66,5 @@ class LiveView:
         table.add_row("session time", f"{status.session_time_s:.0f} s (x{self.time_scale:g})")
         events = Table.grid()
         for t_s, level, message in status.events:
-            events.add_row(f"[{_LEVEL_STYLE.get(level, '')}]{t_s:7.1f} s  {message}[/]")
+            events.add_row(f"[{_LEVEL_STYLE.get(level, '')}]{t_s:7.1f} s  {escape(message)}[/]")
         return Panel(Group(self._progress, table, events), title=self.title)

@@ -1,7 +1,8 @@
 """Which plan a session plays: a built-in by name, or a plan file.
 
 Built-ins: ``paper`` (40 calibration poses + the nine sweeps, 229 steps), ``calibration``
-(the 40 poses), ``sweeps`` (the nine sweeps), ``imu-vs-em`` (static poses and slow
+or ``calibration:COUNT`` (the 40 poses, or COUNT of them), ``sweeps`` (the nine sweeps),
+``imu-vs-em`` (static poses and slow
 ramps), ``hold`` or ``hold:SECONDS`` (jets off, held).
 
 Plan files list force steps, one per row, with columns (CSV header) or keys (TOML
@@ -19,9 +20,9 @@ Plan files list force steps, one per row, with columns (CSV header) or keys (TOM
 from __future__ import annotations
 
 import csv
-import tomllib
 from pathlib import Path
 
+from ..config.loading import read_toml
 from ..errors import UserError
 from ..plans import (DEFAULT_SETTLE_S, Plan, calibration_plan, hold_plan, imu_versus_em_plan, paper_protocol,
                      plan_from_rows, validation_sweeps)
@@ -31,11 +32,17 @@ BUILT_IN = ("paper", "calibration", "sweeps", "imu-vs-em", "hold")
 
 def choose_plan(spec: str, settle_s: float = DEFAULT_SETTLE_S, seed: int = 0) -> Plan:
     """The plan ``spec`` names; every problem is a `UserError` naming the file and row."""
-    name, _, argument = spec.partition(":")
+    name, colon, argument = spec.partition(":")
+    if colon and name in BUILT_IN and name not in ("calibration", "hold"):
+        raise UserError(f"plan {spec!r}: {name} takes no argument (only calibration:COUNT and hold:SECONDS do)")
     if name == "paper":
         return paper_protocol(seed=seed, settle_s=settle_s)
     if name == "calibration":
-        return calibration_plan(seed=seed, settle_s=settle_s)
+        if not colon:
+            return calibration_plan(seed=seed, settle_s=settle_s)
+        if not argument.isdigit() or int(argument) < 1:
+            raise UserError(f"plan {spec!r}: calibration:COUNT takes a whole number of poses >= 1")
+        return calibration_plan(int(argument), seed=seed, settle_s=settle_s)
     if name == "sweeps":
         return validation_sweeps(settle_s=settle_s)
     if name == "imu-vs-em":
@@ -55,14 +62,15 @@ def choose_plan(spec: str, settle_s: float = DEFAULT_SETTLE_S, seed: int = 0) ->
                         for row in csv.DictReader(line for line in handle if not line.startswith("#"))]
             return plan_from_rows(rows, str(path), settle_s)
         if path.suffix.lower() == ".toml":
-            with path.open("rb") as handle:
-                document = tomllib.load(handle)
+            document = read_toml(path, what="plan file")
             default = document.get("settle_s", settle_s)
             steps = document.get("step")
             if not isinstance(steps, list) or not all(isinstance(row, dict) for row in steps):
                 raise ValueError(f"{path}: expected [[step]] tables with q1, q2, q3")
             return plan_from_rows(steps, str(path), default)
-    except (ValueError, tomllib.TOMLDecodeError) as error:
+    except UnicodeDecodeError as error:
+        raise UserError(f"{path}: not UTF-8 text (byte {error.start}); save it as UTF-8") from None
+    except ValueError as error:
         raise UserError(str(error) if str(path) in str(error) else f"{path}: {error}") from None
     except OSError as error:
         raise UserError(f"{path}: cannot read: {error.strerror or error}") from None

@@ -20,6 +20,7 @@ from drivers.imu import AsyncIcm20948, Icm20948, ImuPairFusion
 from drivers.valve.client import ValveController
 
 from ..config import SIM, RigConfig
+from ..errors import UserError
 from ..profile import RigProfile
 from .clock import Clock
 from .simulated_rig import SimulatedDevices, simulated_devices
@@ -77,7 +78,12 @@ async def open_rig(profile: RigProfile, settings: RigConfig, clock: Clock, *, se
         if imu_bus is None and transports.imu_bus != SIM:
             import smbus2  # only a real rig needs it
 
-            imu_bus = stack.enter_context(smbus2.SMBus(transports.imu_bus))
+            try:
+                imu_bus = stack.enter_context(smbus2.SMBus(transports.imu_bus))
+            except OSError as error:
+                raise UserError(f"{profile.source}: transports.imu_bus = {transports.imu_bus}: cannot open "
+                                f"/dev/i2c-{transports.imu_bus}: {error.strerror or error} (is this the rig's "
+                                'PC? imu_bus = "sim" emulates the IMUs)') from None
         tracker = AuroraTracker(tracker_url, list(settings.tracker.tools), use_tx=settings.tracker.use_tx,
                                 clock=clock.now)
         await stack.enter_async_context(tracker)

@@ -101,6 +101,7 @@ class SessionRequest:
     calibration_names: tuple[str, ...] = PARAMETER_NAMES
     seed: int | None = None
     command_line: str = ""
+    warnings: tuple[str, ...] = ()  # about the request (say, clipped plan steps): logged as events at the start
 
 
 @dataclass
@@ -178,6 +179,8 @@ class Session:
                        flush_interval_s=request.settings.session.flush_interval_s) as log:
             self._log = log
             self._write_parameters()
+            for warning in request.warnings:
+                self.event("warning", "plan", warning)
             try:
                 completed = await self._run_devices()
             except asyncio.CancelledError:
@@ -186,7 +189,8 @@ class Session:
             except Exception as error:
                 cause = _first_leaf(error)
                 self.event("error", "session", f"stopped: {type(cause).__name__}: {cause}")
-                if isinstance(cause, UserError):
+                # A twin with no equilibrium for the profile's rod is the user's inputs too.
+                if isinstance(cause, (UserError, ConvergenceError)):
                     raise cause from error
                 if isinstance(cause, DEVICE_ERRORS):
                     raise SessionAborted(f"device failure: {cause}") from error

@@ -33,6 +33,9 @@ def run(args: argparse.Namespace) -> int:
     if not args.position_weight >= 0:
         raise UserError(f"--position-weight must be >= 0, got {args.position_weight}")
     profile, steps = load_steps(args.input, args.profile)
+    if len(steps.calibration_rows()) == 0:
+        raise UserError(f"{args.input}: no calibration poses (steps of sweep -1) to fit on; record some "
+                        "with `hydrojet-bench run --plan calibration`")
     choice = model_choice(args)
     model = choice.model
     try:
@@ -59,5 +62,5 @@ def run(args: argparse.Namespace) -> int:
                      "poses": len(steps.calibration_rows()),
                      "rms_orientation_deg_before": round(result.rms_orientation_deg_before, 4),
                      "rms_orientation_deg_after": round(result.rms_orientation_deg_after, 4)}))
-    console.print(f"wrote {args.output}")
+    console.print(f"wrote {render.plain(args.output)}")
     return 0

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..errors import UserError
 from ..inputs import load_dataset
 from ..data.dataset import Dataset
 from ..models import MODELS
@@ -35,6 +36,12 @@ def add_model_arguments(parser: argparse.ArgumentParser, default: str, params: s
         parser.add_argument("--params", type=Path, required=params_required, metavar="FILE",
                             help=f"parameter file from `calibrate`: {params}; it brings its model and effects, "
                                  "--model and --effect on the command line win")
+
+
+def check_seed(seed: int | None) -> None:
+    """--seed, when given, is a noise seed: an integer >= 0 (numpy's rule)."""
+    if seed is not None and seed < 0:
+        raise UserError(f"--seed must be an integer >= 0, got {seed}")
 
 
 def load_steps(path: Path, profile: str | None) -> tuple[RigProfile, Dataset]:

@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
 
         for path in write_report(args.report, after.results, validation, after.model.name,
                                  baseline=None if before is None else before.results):
-            console.print(f"wrote {path}")
+            console.print(f"wrote {render.plain(path)}")
     return 0
 
 

@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         from ..analysis.diagnosis.plots import write_diagnosis_report
 
         for path in write_diagnosis_report(args.report, diagnosis):
-            console.print(f"wrote {path}")
+            console.print(f"wrote {render.plain(path)}")
     return 0
 
 
@@ -68,7 +68,7 @@ def _diagnose(args: argparse.Namespace, profile, steps, choice: ModelChoice, can
     samples = load_dataset(args.input, profile) if repeatability_floor(steps) is None else None
 
     def say(message: str) -> None:
-        progress.print(f"[dim]{message}[/]", highlight=False)
+        progress.print(f"[dim]{render.plain(message)}[/]", highlight=False)
 
     try:
         return diagnose(steps, choice.model.name, choice.requested, candidates, samples=samples,
@@ -82,7 +82,7 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
     noise = diagnosis.noise
     window = ("" if noise.window_orientation_deg is None
               else f"; within-window scatter gives {noise.window_orientation_deg:.3f} deg")
-    console.print(f"{diagnosis.model} on {args.input}: {diagnosis.split.description}.")
+    console.print(f"{diagnosis.model} on {render.plain(args.input)}: {diagnosis.split.description}.")
     console.print(f"Noise floor {diagnosis.noise_floor_deg:.3f} deg ({noise.method}, {noise.dof} dof{window}); "
                   f"the baseline's held-out error is {diagnosis.baseline_heldout_rmse_deg:.3f} deg "
                   f"(at the floor up to {diagnosis.at_floor_threshold_deg:.3f} deg).")

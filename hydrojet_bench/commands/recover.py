@@ -34,6 +34,6 @@ def run(args: argparse.Namespace) -> int:
     state = ("was truncated (unfinished or damaged); kept everything before the damage" if report.truncated
              else "was complete")
     console = Console()
-    console.print(f"{args.input} {state}", highlight=False, soft_wrap=True)
-    console.print(f"wrote {output}: {span}", highlight=False, soft_wrap=True)
+    console.print(f"{args.input} {state}", highlight=False, soft_wrap=True, markup=False)
+    console.print(f"wrote {output}: {span}", highlight=False, soft_wrap=True, markup=False)
     return 0

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from ..errors import UserError
@@ -27,10 +28,17 @@ def console_for(args: argparse.Namespace) -> Console:
     return Console(stderr=_is_stdout(getattr(args, "json", None)))
 
 
+def plain(value: object) -> str:
+    """User text (a path, a profile name, a CSV cell) made inert for rich markup, so that
+    ``[bold]x.csv`` or ``[/x]`` prints as written instead of styling or failing."""
+    return escape(str(value))
+
+
 def table(title: str, labels: Sequence[str], numbers: Sequence[str], caption: str | None = None) -> Table:
-    """A table whose label columns (left-aligned, never wrapped) come before its number
+    """A table (its title printed as written, no markup) whose label columns
+    (left-aligned, never wrapped) come before its number
     columns (right-aligned)."""
-    result = Table(title=title, caption=caption)
+    result = Table(title=plain(title), caption=caption)
     for header in labels:
         result.add_column(header, no_wrap=True)
     for header in numbers:

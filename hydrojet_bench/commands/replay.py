@@ -55,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
     online = OnlineSettings() if args.online else None
     estimates = replay(session, model, online, params)
     if session.truncated:
-        console.print(f"[yellow]{args.input} is truncated: replaying the {len(session.steps)} steps before the cut[/]")
+        console.print(f"[yellow]{render.plain(args.input)} is truncated: replaying the {len(session.steps)} "
+                      "steps before the cut[/]")
     kept = [i for i, estimate in enumerate(estimates) if estimate is not None]
     validation = [i for i in kept if session.steps.sweep[i] >= 0] or kept
     if not validation:
@@ -74,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         from ..analysis.report import write_report
 
         for path in write_report(args.report, results, steps, model.name):
-            console.print(f"wrote {path}")
+            console.print(f"wrote {render.plain(path)}")
     missed = len(estimates) - len(kept)
     if missed:
         console.print(f"[yellow]{missed} step(s) did not converge and were left out[/]")

@@ -22,11 +22,12 @@ import msgspec
 import numpy as np
 from rich.console import Console
 
+from ..config.schema import MAX_TIME_SCALE
 from ..errors import UserError
 from ..model_choice import ModelDefaults, model_choice
 from ..profile import load_profile
 from . import render
-from .common import add_model_arguments
+from .common import add_model_arguments, check_seed
 
 DEFAULT_LOG_DIR = Path("sessions")
 
@@ -35,7 +36,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("run", help="run a bench session (simulated rig by default)")
     parser.add_argument("--profile", default="sim", help="rig profile: a TOML file or a shipped name (default: sim)")
     parser.add_argument("--plan", default="paper",
-                        help="paper (default), calibration, sweeps, imu-vs-em, hold[:SECONDS], or a .csv/.toml plan file")
+                        help="paper (default), calibration[:COUNT], sweeps, imu-vs-em, hold[:SECONDS], or a .csv/.toml "
+                             "plan file")
     parser.add_argument("--log", type=Path, metavar="FILE",
                         help=f"MCAP log to write (default: {DEFAULT_LOG_DIR}/<profile>-<time>.mcap)")
     add_model_arguments(parser, default="the profile's [estimator] model",
@@ -54,17 +56,22 @@ def run(args: argparse.Namespace) -> int:
     from ..bench.plan_choice import choose_plan
     from ..bench.session import SessionRequest
 
+    check_seed(args.seed)
     profile = load_profile(args.profile)
     settings = profile.config
     if args.time_scale is not None:
-        if not args.time_scale > 0:
-            raise UserError(f"--time-scale must be > 0, got {args.time_scale}")
+        if not 0 < args.time_scale <= MAX_TIME_SCALE:
+            raise UserError(f"--time-scale must be > 0 and at most {MAX_TIME_SCALE:g} (the simulated rig "
+                            f"cannot keep up beyond), got {args.time_scale}")
         if not settings.transports.simulated and args.time_scale != 1.0:
             raise UserError("--time-scale applies to the simulated rig only; this profile drives real devices")
         settings = msgspec.structs.replace(settings, session=msgspec.structs.replace(settings.session,
                                                                                      time_scale=args.time_scale))
-    plan = choose_plan(args.plan, settle_s=settings.session.settle_s)
-    choice = model_choice(args, ModelDefaults(settings.estimator.model, tuple(settings.estimator.effects)))
+    limits = tuple(table.max_force_n for table in settings.valve_calibrations())
+    plan, clipped = choose_plan(args.plan, settle_s=settings.session.settle_s).clipped(limits)
+    clipped_warning = _clipped_warning(clipped, limits)
+    choice = model_choice(args, ModelDefaults(settings.estimator.model, tuple(settings.estimator.effects),
+                                              origin=f"{profile.source} (estimator.effects)"))
     model, requested = choice.model, choice.requested
     log_path = args.log or DEFAULT_LOG_DIR / f"{profile.name}-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
     try:
@@ -74,21 +81,35 @@ def run(args: argparse.Namespace) -> int:
     request = SessionRequest(profile=profile, settings=settings, plan=plan, log_path=log_path, model=model,
                              effects=choice.effect_specs, params=choice.parameters(profile.model_parameters()),
                              calibrate=not args.no_calibration, calibration_names=choice.calibration_names,
-                             seed=args.seed,
+                             seed=args.seed, warnings=(clipped_warning,) if clipped_warning else (),
                              command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]))
     console = render.console_for(args)
-    console.print(f"session on [bold]{profile.name}[/] ({'simulated rig' if settings.transports.simulated else 'rig'}): "
+    rig = "simulated rig" if settings.transports.simulated else "rig"
+    console.print(f"session on [bold]{render.plain(profile.name)}[/] ({rig}): "
                   f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.session.time_scale:g}, "
-                  f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; log {log_path}")
-    result = asyncio.run(_run_session(request, console, live=not args.no_live and console.is_terminal))
+                  f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; "
+                  f"log {render.plain(log_path)}", highlight=False)
+    if clipped_warning:
+        console.print(f"[yellow]warning:[/] {clipped_warning}")
+    result = asyncio.run(_run_session(request, console, live=not args.no_live and console.is_terminal,
+                                      clipped=frozenset(clipped)))
     if result is None:
-        console.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {log_path}")
+        console.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
         return 143
     _print_outcome(console, result, model.name, args)
     return 0
 
 
-async def _run_session(request, console: Console, live: bool):
+def _clipped_warning(clipped: tuple[int, ...], limits: tuple[float, ...]) -> str:
+    if not clipped:
+        return ""
+    shown = ", ".join(str(index + 1) for index in clipped[:5]) + (", ..." if len(clipped) > 5 else "")
+    return (f"{len(clipped)} step(s) of the plan ({shown}) ask more than the valves give "
+            f"({', '.join(f'{limit:g}' for limit in limits)} N per jet): they are played, logged and predicted "
+            "at the clipped force")
+
+
+async def _run_session(request, console: Console, live: bool, clipped: frozenset[int]):
     from ..bench.live_view import LiveView
     from ..bench.session import Session
 
@@ -106,7 +127,7 @@ async def _run_session(request, console: Console, live: bool):
         if live else contextlib.nullcontext()
     try:
         with view_context as view:
-            on_update = view.update if live else _printer(console)
+            on_update = view.update if live else _printer(console, clipped)
             session = Session(request, on_update=on_update)
             return await session.run()
     except asyncio.CancelledError:
@@ -118,21 +139,25 @@ async def _run_session(request, console: Console, live: bool):
         loop.remove_signal_handler(signal.SIGTERM)
 
 
-def _printer(console: Console):
+def _printer(console: Console, clipped: frozenset[int]):
     last = [-1]
 
     def update(status) -> None:
-        # One line per sweep (and per 10 calibration poses) keeps a log file readable.
+        # One line per sweep (and per 10 calibration poses, and per clipped step) keeps a
+        # log file readable.
         step = status.step
         if step is None or status.step_index == last[0]:
             return
         last[0] = status.step_index
-        if status.phase == "done" or step.step % 10 == 0 or status.step_index + 1 == status.step_count:
+        if (status.phase == "done" or step.step % 10 == 0 or status.step_index + 1 == status.step_count
+                or status.step_index in clipped):
             online = "-" if status.online_error_deg is None else f"{status.online_error_deg:.2f}"
             ref = "-" if status.ref_error_deg is None else f"{status.ref_error_deg:.2f}"
-            console.print(f"step {status.step_index + 1}/{status.step_count} {status.phase}: tip error ref {ref} deg, "
+            flag = " (clipped to the valves' limit)" if status.step_index in clipped else ""
+            console.print(f"step {status.step_index + 1}/{status.step_count} {status.phase}{flag}: "
+                          f"tip error ref {ref} deg, "
                           f"online {online} deg; EM {status.em_frames} frames, IMU {status.imu_samples} samples",
-                          highlight=False)
+                          highlight=False, markup=False)
 
     return update
 
@@ -161,11 +186,11 @@ def _print_outcome(console: Console, result, model_name: str, args: argparse.Nam
                 from ..analysis.report import write_report
 
                 for path in write_report(args.report, results, validation_steps, model_name):
-                    console.print(f"wrote {path}")
+                    console.print(f"wrote {render.plain(path)}")
     log = result.log_path
     console.print("\nnext:")
     for line in (f"hydrojet-bench replay {log} --online            # re-run the estimation offline",
                  f"hydrojet-bench compare {log} --params P.toml --online  # Table II from the log",
                  f"hydrojet-bench diagnose {log} --model {model_name}     # which physical effect is missing?",
                  f"hydrojet-bench sensors {log} --report sensors/  # IMU versus EM tracker"):
-        console.print(f"  {line}", highlight=False)
+        console.print(f"  {render.plain(line)}", highlight=False)

@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
             "online_estimation": None if estimation is None else {"model": model_line, **estimation.as_dict()}})
     if args.report:
         for path in write_sensor_report(args.report, agreement):
-            console.print(f"wrote {path}")
+            console.print(f"wrote {render.plain(path)}")
     return 0
 
 

@@ -17,6 +17,7 @@ from ..effects import load_effect
 from ..plans import paper_protocol
 from ..profile import load_profile
 from ..twin import DigitalTwin, TwinConfig
+from .common import check_seed
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -31,6 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_seed(args.seed)
     profile = load_profile(args.profile)
     changes: dict[str, object] = {}
     if args.hidden:
@@ -44,5 +46,5 @@ def run(args: argparse.Namespace) -> int:
     rows = write_csv(recording.to_dataset(profile, f"twin seed {config.seed}"), args.output)
     hidden_names = ", ".join(effect.name for effect in hidden) or "none"
     Console().print(f"wrote {rows} samples (229 steps: 40 calibration poses, 9 sweeps) to {args.output}; "
-                    f"hidden effects: {hidden_names}")
+                    f"hidden effects: {hidden_names}", markup=False)
     return 0

@@ -32,6 +32,8 @@ def read_toml(path: Path, what: str = "file") -> dict[str, Any]:
         raise UserError(f"{path}: no such {what}") from None
     except tomllib.TOMLDecodeError as error:
         raise UserError(f"{path}: not valid TOML: {error}") from None
+    except UnicodeDecodeError as error:
+        raise UserError(f"{path}: not UTF-8 text (byte {error.start}); save it as UTF-8") from None
     except OSError as error:
         raise UserError(f"{path}: cannot read: {error.strerror or error}") from None
 

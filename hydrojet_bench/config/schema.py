@@ -40,11 +40,12 @@ import msgspec
 
 from drivers.imu.calibration import ImuCalibration
 from drivers.imu.fusion import DEFAULT_FUSION, FusionName
+from drivers.transport.url import open_transport
 from drivers.valve.calibration import JetCalibration
 from drivers.valve.protocol import DUTY_MAX_PERMILLE
 
 from ..models import MODELS
-from ..params import JET_COUNT, CapsuleParameters, JetLayout, RodParameters
+from ..params import JET_COUNT, MAX_PLAUSIBLE_JET_FORCE_N, CapsuleParameters, JetLayout, RodParameters, check_plausible
 
 # Device transports in [transports]: "sim" serves an in-process emulator on the digital
 # twin, "pty" the same emulator on a pseudo-terminal (the serial code path).
@@ -161,6 +162,11 @@ class RodTable(Table, kw_only=True):
     youngs_modulus_base_pa: Positive = _ROD.youngs_modulus_base_pa  # E at the clamp, Pa
     youngs_modulus_tip_pa: Positive = _ROD.youngs_modulus_tip_pa    # E at the tip, Pa
 
+    def __post_init__(self) -> None:
+        for name, field_name in (("E0", "youngs_modulus_base_pa"), ("EL", "youngs_modulus_tip_pa"),
+                                 ("L", "length_m")):
+            check_plausible(name, getattr(self, field_name), field_name)
+
     def parameters(self) -> RodParameters:
         return RodParameters(**msgspec.structs.asdict(self))
 
@@ -184,6 +190,9 @@ class JetsTable(Table, kw_only=True):
         if isinstance(self.max_force_n, tuple) and len(self.max_force_n) != JET_COUNT:
             raise ValueError(f"max_force_n must be a number or a list of {JET_COUNT} numbers (N), "
                              f"got {len(self.max_force_n)} numbers")
+        if max(self.max_force_per_jet_n) > MAX_PLAUSIBLE_JET_FORCE_N:
+            raise ValueError(f"max_force_n = {max(self.max_force_per_jet_n):g} N is outside the plausible range "
+                             f"0 .. {MAX_PLAUSIBLE_JET_FORCE_N:g} N (a unit slip?)")
 
     def layout(self) -> JetLayout:
         return JetLayout(ring_angle_rad=math.radians(self.ring_angle_deg))
@@ -213,6 +222,13 @@ class TransportsTable(Table, kw_only=True):
             if not (value in (SIM, PTY) or "://" in value or value.startswith("/")):
                 raise ValueError(f'{name} must be "sim", "pty" or a transport URL (serial:///dev/ttyUSB0, '
                                  f"pty:///dev/pts/7, /dev/ttyUSB0), got {value!r}")
+            if value not in (SIM, PTY):
+                # Parsed now (not opened), so a bad scheme or baud is named with its key
+                # when the profile loads rather than as a driver's error mid-session.
+                try:
+                    open_transport(value)
+                except ValueError as error:
+                    raise ValueError(f"{name} is not a usable transport URL: {error}") from None
         if self.imu_bus != SIM and (isinstance(self.imu_bus, str) or self.imu_bus < 0):
             raise ValueError(f'imu_bus must be "sim" or an I2C bus number (>= 0), got {self.imu_bus!r}')
 
@@ -313,10 +329,16 @@ class ValvesTable(Table, kw_only=True):
                      for table, limit in zip(tables, jets.max_force_per_jet_n, strict=True))
 
 
+# Beyond this the simulated devices' loops fall behind the session clock (measured: at
+# x3000 a 1 s plan takes 1700 s of session time and no step is estimated).
+MAX_TIME_SCALE = 1000.0
+
+
 class SessionTable(Table, kw_only=True):
     settle_s: Positive = 5.0          # hold each command this long, session s (the paper: 5 s)
     window_s: Positive = 1.0          # average the last window_s of each step, session s
-    time_scale: Positive = 1.0        # session seconds per wall second (> 1 only on the sim rig)
+    # session seconds per wall second (> 1 only on the sim rig)
+    time_scale: Annotated[float, msgspec.Meta(gt=0.0, le=MAX_TIME_SCALE)] = 1.0
     flush_interval_s: Positive = 1.0  # log flush period, wall s: what a crash may lose
 
     def __post_init__(self) -> None:

@@ -186,8 +186,9 @@ def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
     orientations = {}
     for sensor, quaternion_columns in _QUATERNIONS.items():
         q = np.column_stack([values[c] for c in quaternion_columns])
-        norm = np.linalg.norm(q, axis=1)
-        bad = np.flatnonzero(np.abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE)
+        with np.errstate(over="ignore"):  # a 1e308 component: its norm is inf, reported below
+            norm = np.linalg.norm(q, axis=1)
+        bad = np.flatnonzero(~(np.abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE))
         if len(bad):
             i = int(bad[0])
             first = min(order[c] for c in quaternion_columns)
@@ -229,6 +230,13 @@ def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
 def _parse_numbers(strings: tuple[str, ...], column: str, problem: _Problem, column_order: int,
                    where: Callable[[int, str], str], *, integer: bool) -> np.ndarray | None:
     """One column's cells as numbers; problems go to ``problem`` (None returned)."""
+    if "_" in "".join(strings):
+        # float() reads "1_000" as 1000: a digit-group separator is more likely a typo
+        # (a merged cell, a mistyped decimal point) than data, so refuse it.
+        i = next(i for i, text in enumerate(strings) if "_" in text)
+        problem.offer(i, column_order, f"{where(i, column)}: {strings[i].strip()!r} is not a number "
+                                       "(no '_' separators)")
+        return None
     try:
         array = np.array(strings, dtype=float)  # fast path; same grammar as float()
     except ValueError:
@@ -251,7 +259,8 @@ def _parse_numbers(strings: tuple[str, ...], column: str, problem: _Problem, col
         problem.offer(i, column_order, f"{where(i, column)}: must be a finite number, got {strings[i].strip()}")
         return None
     if integer:
-        fractional = np.flatnonzero(array != np.round(array))
+        # Labels, not measurements: beyond 2**53 a float no longer holds every integer.
+        fractional = np.flatnonzero((array != np.round(array)) | (np.abs(array) > 2.0**53))
         if len(fractional):
             i = int(fractional[0])
             problem.offer(i, column_order, f"{where(i, column)}: {strings[i].strip()!r} is not an integer")

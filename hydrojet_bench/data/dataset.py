@@ -116,7 +116,8 @@ def _float_array(name: str, value: ArrayLike, shape_tail: tuple[int, ...], rows:
         raise ValueError(f"Dataset.{name} must have shape {expected}, got {array.shape}")
     if rows is not None and len(array) != rows:
         raise ValueError(f"Dataset.{name} has {len(array)} rows, time_s has {rows}")
-    bad = ~np.isfinite(array).reshape(len(array), -1).all(axis=1)
+    # Over every axis but the rows: also right for an empty selection (no calibration poses).
+    bad = ~np.isfinite(array).all(axis=tuple(range(1, array.ndim)))
     if np.any(bad):
         raise ValueError(f"Dataset.{name} row {int(np.argmax(bad))} is not finite")
     return array

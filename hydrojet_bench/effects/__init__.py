@@ -19,6 +19,7 @@ from .nonlinear_elasticity import NonlinearElasticity
 from .pressure_stiffening import PressureStiffening
 from .sensor_mounting import SensorMounting
 from .stiffness_profile import StiffnessProfile
+from .user import checked_effect
 
 # Canonical library, in the order users see it: gravity (on by default), then the
 # effects a calibration can add to diagnose a rig, grouped by what they act on
@@ -52,22 +53,22 @@ def load_effect(spec: str) -> Effect:
         raise UserError(f"effect {spec!r}: {path} is not a Python file")
     module = importlib.util.module_from_spec(module_spec)
     sys.modules[module_name] = module
+    origin = f"{path}:{class_name}"
     try:
         module_spec.loader.exec_module(module)
-    except Exception as error:  # the user's code: report, don't crash with a traceback
-        raise UserError(f"effect {spec!r}: importing {path} failed: {type(error).__name__}: {error}") from error
+    except (Exception, SystemExit) as error:  # the user's code: report, don't crash or exit
+        raise UserError(f"effect {origin}: importing {path} failed: {_describe(error)}") from None
     cls = getattr(module, class_name, None)
     if cls is None or not inspect.isclass(cls):
-        raise UserError(f"effect {spec!r}: {path} defines no class {class_name!r}")
+        raise UserError(f"effect {origin}: {path} defines no class {class_name!r}")
     try:
         effect = cls()
-    except Exception as error:
-        raise UserError(f"effect {spec!r}: {class_name}() failed: {type(error).__name__}: {error}") from error
-    missing = [attr for attr in ("name", "explanation", "parameters", "uses_actuation", "apply")
-               if not hasattr(effect, attr)]
-    if missing:
-        raise UserError(f"effect {spec!r}: class {class_name} lacks {', '.join(missing)} "
-                        "(see hydrojet_bench.effects.base.Effect)")
-    if not all(isinstance(p, EffectParameter) for p in effect.parameters):
-        raise UserError(f"effect {spec!r}: {class_name}.parameters must be EffectParameter items")
-    return effect
+    except (Exception, SystemExit) as error:
+        raise UserError(f"effect {origin}: {class_name}() failed: {_describe(error)}") from None
+    return checked_effect(effect, origin, LIBRARY)
+
+
+def _describe(error: BaseException) -> str:
+    if isinstance(error, SystemExit):
+        return f"it called sys.exit({error.code!r})"
+    return f"{type(error).__name__}: {error}"

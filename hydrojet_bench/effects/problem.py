@@ -25,7 +25,9 @@ import numpy as np
 from ..params import ModelParameters, actuation_matrix
 
 
-@dataclass
+# slots: an effect assigning a misspelt attribute (problem.jet_gain = ...) gets an
+# AttributeError instead of silently changing nothing.
+@dataclass(slots=True)
 class RodProblem:
     """Mutable description of one static solve. Arrays indexed by sample point have
     ``len(arc_length_m)`` rows; the model chooses the sample points."""

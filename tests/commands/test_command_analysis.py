@@ -54,7 +54,7 @@ def test_user_mistakes_name_the_file_and_key(recorded, tmp_path):
     bad_csv.write_text("t,q1\n0,0\n")
     for args, message in (
         (["compare", str(data), "--params", str(tmp_path / "none.toml")], "no such parameter file"),
-        (["compare", str(data), "--params", str(broken)], "rod.youngs_modulus_base_pa must be > 0"),
+        (["compare", str(data), "--params", str(broken)], "parameters.E0 = -5 Pa is outside the plausible range"),
         (["calibrate", str(bad_csv), "-o", str(tmp_path / "p.toml")], "bad.csv"),
         (["calibrate", str(data), "--effect", "warp_drive", "-o", str(tmp_path / "p.toml")], "unknown effect"),
     ):

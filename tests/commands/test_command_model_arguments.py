@@ -16,7 +16,7 @@ from hydrojet_bench.cli import COMMAND_MODULES, build_parser
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.model_choice import ModelDefaults, choose_model
 from hydrojet_bench.models import MODELS
-from hydrojet_bench.params import ModelParameters
+from hydrojet_bench.params import PARAMETER_NAMES, ModelParameters, get_parameter
 from hydrojet_bench.params_io import ParameterFile, write_parameter_file
 
 MODEL_COMMANDS = {"run", "replay", "sensors", "calibrate", "compare", "diagnose"}
@@ -68,11 +68,15 @@ def test_no_command_resolves_a_model_itself():
             assert "model_choice(" in source, name
 
 
+# A parameter file lists everything calibrate fits; these are the nominal values.
+NOMINAL = {name: get_parameter(ModelParameters(), name) for name in PARAMETER_NAMES}
+
+
 @pytest.fixture
 def parameter_file(tmp_path) -> Path:
     path = tmp_path / "p.toml"
     write_parameter_file(path, ParameterFile(model="prb", effects=("gravity", "jet_gain"),
-                                             parameters={"E0": 4.0e5, "jet_gain.gain_2": 0.7}))
+                                             parameters={**NOMINAL, "E0": 4.0e5, "jet_gain.gain_2": 0.7}))
     return path
 
 
@@ -108,7 +112,7 @@ def test_a_parameter_file_brings_its_model_effects_and_values_and_the_command_li
 def test_a_file_effect_in_a_parameter_file_is_found_by_its_name_among_the_effect_files(tmp_path):
     path = tmp_path / "clogged.toml"
     write_parameter_file(path, ParameterFile(model="cosserat", effects=("gravity", "clogged_jet"),
-                                             parameters={"E0": 4.0e5}))
+                                             parameters={**NOMINAL, "E0": 4.0e5}))
     with pytest.raises(UserError, match=f"{re.escape(str(path))}: effect 'clogged_jet' is not in the library"):
         choose_model(None, [], path, DEFAULTS)
     choice = choose_model(None, [], path, DEFAULTS, effect_files=[CLOGGED_JET])

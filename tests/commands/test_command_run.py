@@ -76,9 +76,11 @@ def test_live_view_renders_progress_errors_and_health():
                            remaining_session_s=600.0, ref_error_deg=1.234, online_error_deg=0.456,
                            disturbance_norm_nm=2.5e-4, em_frames=4000, em_missing=3, imu_samples=1000)
     status.events.append((12.0, "warning", "sensor not tracked: tip MISSING"))
+    status.events.append((13.0, "error", "stopped: effect [bold]my[/x].py:Twist: apply failed"))
     console = Console(record=True, width=100)
     console.print(LiveView(console, time_scale=25.0, title="test").render(status))
     text = console.export_text()
     for expected in ("step 100/229", "sweep 3", "q1 0.050", "ref 1.23", "online 0.46", "0.25 mN m",
-                     "4000 frames, 3 incomplete", "sensor not tracked", "ETA 00:24"):
+                     "4000 frames, 3 incomplete", "sensor not tracked", "ETA 00:24",
+                     "effect [bold]my[/x].py:Twist"):
         assert expected in text, (expected, text)

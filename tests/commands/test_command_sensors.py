@@ -88,3 +88,14 @@ def test_a_log_without_imu_samples_is_a_user_error(tmp_path, capsys):
 def test_bad_options_are_user_errors(session_log, capsys):
     assert main(["sensors", str(session_log), "--settle", "-1"]) == 2
     assert "--settle" in capsys.readouterr().err
+
+
+def test_a_log_without_calibration_poses_is_reported_not_a_traceback(tmp_path, capsys):
+    log = tmp_path / "hold.mcap"
+    assert main(["run", "--plan", "hold:2", "--no-live", "--time-scale", "20", "--log", str(log)]) == 0
+    capsys.readouterr()
+    assert main(["sensors", str(log)]) == 0
+    assert "no EM calibration poses (sweep -1) in the log" in " ".join(capsys.readouterr().out.split())
+    assert main(["calibrate", str(log), "-o", str(tmp_path / "p.toml")]) == 2
+    assert capsys.readouterr().err == (f"error: {log}: no calibration poses (steps of sweep -1) to fit on; record "
+                                       "some with `hydrojet-bench run --plan calibration`\n")

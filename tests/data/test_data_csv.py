@@ -103,11 +103,12 @@ def test_forces_above_the_profile_limit_are_flagged_not_dropped(tmp_path: Path) 
         (set_cell(1, "sweep", "-2"), 5, "sweep", "-1 for calibration"),
         (set_cell(3, "q1", "-0.01"), 7, "q1", "a jet cannot pull"),
         (table(ROWS[:2] + ["# a late comment"] + ROWS[2:]), 6, None, "only allowed before the header"),
+        (set_cell(1, "t", "1_000"), 5, "t", "'1_000' is not a number (no '_' separators)"),
     ],
     ids=["missing-required", "unknown", "duplicate", "partial-triplet-header", "empty-cell",
          "partial-triplet-row", "short-row", "long-row", "non-numeric", "nan-quaternion", "inf-time",
          "non-unit-tip", "non-unit-base", "time-backwards", "fractional-sweep", "sweep-below-minus-one",
-         "negative-force", "late-comment"],
+         "negative-force", "late-comment", "digit-separator"],
 )
 def test_every_bad_row_names_file_line_and_column(tmp_path: Path, text: str, line: int,
                                                   column: str | None, expected: str) -> None:
@@ -223,3 +224,9 @@ def test_write_then_read_gives_the_same_dataset(original: Dataset) -> None:
             assert actual is None, name
         else:
             np.testing.assert_array_equal(actual, expected, err_msg=name)
+
+
+def test_a_selection_without_rows_is_an_empty_dataset(tmp_path: Path) -> None:
+    dataset = read_csv(write(tmp_path, table()), PROFILE)
+    empty = dataset.select(dataset.sweep == 99)
+    assert len(empty) == 0 and len(empty.calibration_rows()) == 0

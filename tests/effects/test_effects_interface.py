@@ -66,10 +66,34 @@ def test_a_users_effect_from_a_file_changes_the_shape(tmp_path, model_type):
     ("Missing", USER_EFFECT, "defines no class 'Missing'"),
     ("Broken", "raise RuntimeError('boom')\n", "importing .* failed: RuntimeError: boom"),
     ("Bare", "class Bare:\n    pass\n", "lacks name, explanation, parameters, uses_actuation, apply"),
+    ("TorsionalPreload", "import sys\nsys.exit(3)\n", r"importing .* failed: it called sys.exit\(3\)"),
+    ("TorsionalPreload", USER_EFFECT.replace("def apply(self, problem, values)", "def apply(self, problem)"),
+     r"my_effect.py:TorsionalPreload: apply must take \(problem, values\), not \(problem\)"),
+    ("TorsionalPreload", USER_EFFECT.replace("parameters = (EffectParameter", "parameters = 5 or (EffectParameter"),
+     "my_effect.py:TorsionalPreload: parameters must be a tuple of EffectParameter, got 5"),
+    ("TorsionalPreload", USER_EFFECT.replace('name = "torsional_preload"', 'name = "gravity"'),
+     "my_effect.py:TorsionalPreload: name 'gravity' is a library effect's"),
+    ("TorsionalPreload", USER_EFFECT.replace('+= values["moment_per_length_nm_m"]', '+= 1 / 0'),
+     "my_effect.py:TorsionalPreload: apply failed: ZeroDivisionError"),
+    ("TorsionalPreload", USER_EFFECT.replace('+= values["moment_per_length_nm_m"]', '+= np.nan'),
+     r"my_effect.py:TorsionalPreload: apply left a non-finite value \(NaN or inf\) in "
+     "problem.distributed_moment_in_body_nm_m"),
+    ("TorsionalPreload", USER_EFFECT.replace('problem.distributed_moment_in_body_nm_m[:, 2] +=',
+                                             'problem.distributed_moment_nm_m ='),
+     "apply failed: AttributeError: 'RodProblem' object has no attribute 'distributed_moment_nm_m'"),
 ])
 def test_bad_effect_files_give_clear_errors(tmp_path, spec_suffix, text, message):
     with pytest.raises(UserError, match=message):
         load_effect(f"{write(tmp_path, text)}:{spec_suffix}")
+
+
+def test_an_effect_that_fails_only_on_some_forces_is_named_when_it_fails(tmp_path):
+    text = USER_EFFECT.replace('uses_actuation = False', 'uses_actuation = True').replace(
+        '+= values["moment_per_length_nm_m"]', '+= 0.0 if problem.jet_forces_n[0] < 0.04 else np.inf')
+    model = CosseratModel(effects=(load_effect(f"{write(tmp_path, text)}:TorsionalPreload"),))
+    model.solve([0.0, 0.0, 0.0], PARAMS)
+    with pytest.raises(UserError, match="my_effect.py:TorsionalPreload: apply left a non-finite value"):
+        model.solve([0.05, 0.0, 0.0], PARAMS)
 
 
 def test_unknown_names_and_missing_files_are_user_errors(tmp_path):

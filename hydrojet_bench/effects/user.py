@@ -1,0 +1,91 @@
+"""Effects from a user's file, checked when loaded and guarded when applied.
+
+A user's effect is their code inside our solves: a wrong signature, a ``parameters`` that
+is not a tuple of `EffectParameter`, a name that shadows a library effect, an ``apply``
+that raises or leaves NaN in the problem would otherwise surface as a traceback deep in a
+model (or, for a shadowed name, as a silently different model). `checked_effect` turns
+each into a `UserError` naming the file and the class.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Mapping
+from dataclasses import fields
+
+import numpy as np
+
+from ..errors import UserError
+from ..params import ModelParameters
+from .base import Effect, EffectParameter, effect_values
+from .problem import RodProblem
+
+# Sample points of the trial problem an effect is applied to when it is loaded.
+_TRIAL_SAMPLES = 5
+
+
+class CheckedEffect:
+    """A user's effect whose ``apply`` failures and non-finite results are `UserError`s
+    naming ``origin`` (``path/to/file.py:ClassName``)."""
+
+    def __init__(self, effect: Effect, origin: str) -> None:
+        self.effect = effect
+        self.origin = origin
+        self.name: str = effect.name
+        self.explanation: str = effect.explanation
+        self.parameters: tuple[EffectParameter, ...] = tuple(effect.parameters)
+        self.uses_actuation: bool = effect.uses_actuation
+
+    def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
+        try:
+            self.effect.apply(problem, values)
+        except (Exception, SystemExit) as error:
+            raise UserError(f"effect {self.origin}: apply failed: {type(error).__name__}: {error}") from None
+        for item in fields(problem):
+            value = getattr(problem, item.name)
+            if isinstance(value, (float, np.ndarray)) and not np.all(np.isfinite(value)):
+                raise UserError(f"effect {self.origin}: apply left a non-finite value (NaN or inf) in "
+                                f"problem.{item.name}")
+
+    def __repr__(self) -> str:
+        return f"{self.origin} ({self.name})"
+
+
+def checked_effect(effect: object, origin: str, reserved_names: Mapping[str, object]) -> CheckedEffect:
+    """``effect`` (an instance of a user's class) checked against the `Effect` interface
+    and applied once to the nominal rod; ``reserved_names`` are the library's names, which
+    a user's effect may not take."""
+    missing = [attr for attr in ("name", "explanation", "parameters", "uses_actuation", "apply")
+               if not hasattr(effect, attr)]
+    if missing:
+        raise UserError(f"effect {origin}: the class lacks {', '.join(missing)} "
+                        "(see hydrojet_bench.effects.base.Effect)")
+    name = effect.name  # type: ignore[attr-defined]
+    if not isinstance(name, str) or not name.isidentifier():
+        raise UserError(f"effect {origin}: name must be an identifier such as 'my_effect', got {name!r}")
+    if name in reserved_names:
+        raise UserError(f"effect {origin}: name {name!r} is a library effect's; give the class its own name")
+    parameters = effect.parameters  # type: ignore[attr-defined]
+    if not isinstance(parameters, (tuple, list)) or not all(isinstance(p, EffectParameter) for p in parameters):
+        raise UserError(f"effect {origin}: parameters must be a tuple of EffectParameter, got {parameters!r}")
+    if len({p.name for p in parameters}) != len(parameters):
+        raise UserError(f"effect {origin}: two parameters share a name")
+    if not isinstance(effect.uses_actuation, bool):  # type: ignore[attr-defined]
+        raise UserError(f"effect {origin}: uses_actuation must be True or False")
+    apply = effect.apply  # type: ignore[attr-defined]
+    try:
+        inspect.signature(apply).bind(None, {})
+    except (TypeError, ValueError):
+        raise UserError(f"effect {origin}: apply must take (problem, values), not {_signature(apply)}") from None
+    checked = CheckedEffect(effect, origin)  # type: ignore[arg-type]
+    nominal = ModelParameters()
+    trial = RodProblem.nominal(nominal, np.zeros(3), np.linspace(0.0, nominal.rod.length_m, _TRIAL_SAMPLES))
+    checked.apply(trial, effect_values(checked, nominal))
+    return checked
+
+
+def _signature(function: object) -> str:
+    try:
+        return str(inspect.signature(function))  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return "an unknown signature"
