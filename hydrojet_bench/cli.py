@@ -19,7 +19,7 @@ from . import __version__
 from .errors import UserError
 
 # Order is the order shown in --help.
-COMMAND_MODULES = ("run", "replay", "sensors", "simulate", "calibrate", "compare", "diagnose",
+COMMAND_MODULES = ("run", "replay", "sensors", "simulate", "calibrate", "compare", "diagnose", "study", "batch",
                    "perf", "emulate", "recover")
 
 
