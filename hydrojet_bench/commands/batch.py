@@ -55,9 +55,8 @@ def run(args: argparse.Namespace) -> int:
     tasks = [LogTask(str(path.resolve()), args.profile, getattr(args, "model", "cosserat")) for path in args.logs]
     with tempfile.TemporaryDirectory(prefix="hydrojet-batch-") as scratch:
         store = RowStore(args.output or Path(scratch), columns, "log_id")
-        with dask_client(args.scheduler, args.workers) as client:
-            run_tasks(client, function, tasks, [task.id for task in tasks], store,
-                      error_row=lambda task, text: log_row(task, columns, text), label="logs")
+        run_tasks(lambda: dask_client(args.scheduler, args.workers), function, tasks, [task.id for task in tasks],
+                  store, error_row=lambda task, text: log_row(task, columns, text), label="logs")
         table = store.table()
     order = {task.path: index for index, task in enumerate(tasks)}
     rows = sorted((_plain(row) for row in table.to_dict("records") if row["log"] in order),

@@ -53,9 +53,8 @@ def run(args: argparse.Namespace) -> int:
     store = RowStore(folder, ROW_COLUMNS, "cell_id")
     where = args.scheduler or f"a local cluster of {args.workers} workers"
     console.print(f"study {study.name}: {len(cells)} cells on {where}, rows in {store.rows_folder}")
-    with dask_client(args.scheduler, args.workers) as client:
-        outcome = run_tasks(client, run_cell, cells, [cell.id for cell in cells], store,
-                            error_row=cell_row, label="cells")
+    outcome = run_tasks(lambda: dask_client(args.scheduler, args.workers), run_cell, cells,
+                        [cell.id for cell in cells], store, error_row=cell_row, label="cells")
     console.print(f"{outcome.submitted} cells run ({outcome.skipped} already done), {outcome.failed} failed, "
                   f"{outcome.wall_s:.1f} s ({outcome.cells_per_minute:.2f} cells/min)")
     if args.csv:

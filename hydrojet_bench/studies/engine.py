@@ -23,7 +23,7 @@ from ..errors import UserError
 from .store import RowStore
 
 # A scheduler that does not answer within this is a wrong address, not a slow cluster.
-CONNECT_TIMEOUT_S = 20
+CONNECT_TIMEOUT_S = 10
 
 
 @dataclass(frozen=True)
@@ -63,23 +63,26 @@ def dask_client(scheduler: str | None = None, workers: int = 2) -> Iterator[Any]
         yield client
 
 
-def run_tasks(client: Any, function: Callable[[Any], dict], items: Sequence[Any], ids: Sequence[str],
-              store: RowStore, *, error_row: Callable[[Any, str], dict], label: str = "cells",
-              console: Console | None = None) -> Outcome:
+def run_tasks(connect: Callable[[], contextlib.AbstractContextManager[Any]], function: Callable[[Any], dict],
+              items: Sequence[Any], ids: Sequence[str], store: RowStore, *, error_row: Callable[[Any, str], dict],
+              label: str = "cells", console: Console | None = None) -> Outcome:
     """Run ``function(item)`` for every item whose id is not stored yet, storing each row
-    as it arrives. ``error_row(item, text)`` makes the row of a task that raised (or whose
-    worker died)."""
+    as it arrives. ``connect()`` gives the client (see `dask_client`), only called when
+    there is work left. ``error_row(item, text)`` makes the row of a task that raised (or
+    whose worker died)."""
     from distributed import as_completed
 
     started = time.perf_counter()
     done = store.finished()
     todo = [(item, key) for item, key in zip(items, ids) if key not in done]
+    if not todo:
+        return Outcome(submitted=0, skipped=len(items), failed=0, wall_s=time.perf_counter() - started)
     failed = 0
     console = console or Console(stderr=True)
     columns = (TextColumn(f"[bold]{label}"), BarColumn(), MofNCompleteColumn(),
                TextColumn("{task.fields[rate]}"), TextColumn("ETA"), TimeRemainingColumn(),
                TextColumn("{task.fields[failures]} failed"), TimeElapsedColumn())
-    with Progress(*columns, console=console, transient=False) as progress:
+    with connect() as client, Progress(*columns, console=console, transient=False) as progress:
         task = progress.add_task(label, total=len(todo), rate="-", failures=0)
         futures = {client.submit(function, item, key=f"{label}-{key}", pure=False): item for item, key in todo}
         for count, future in enumerate(as_completed(futures), start=1):
