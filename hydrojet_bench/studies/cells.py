@@ -62,8 +62,9 @@ def expand(study: Study) -> tuple[Cell, ...]:
     scenarios: list[tuple] = []
     if study.none:
         scenarios.append(("none", (), (), "", None, None, ""))
-    for spec, parameter, sizes, default, unit in study.sweeps:
-        scenarios.extend(("sweep", (spec,), ((parameter, size),), parameter, size, default, unit) for size in sizes)
+    for spec, parameter, sizes, default, unit, fixed in study.sweeps:
+        scenarios.extend(("sweep", (spec,), tuple(sorted(((parameter, size), *fixed))), parameter, size, default, unit)
+                         for size in sizes)
     for specs, values in study.pairs:
         scenarios.append(("pair", specs, values, "", None, None, ""))
     names = {spec: load_effect(spec).name for _, specs, *_ in scenarios for spec in specs}

@@ -15,6 +15,7 @@
     effect = "jet_gain"               # a library name or path/to/file.py:Class (relative to the spec)
     parameter = "gain"                # the swept parameter, in the effect's own unit
     sizes = [0.8, 0.9, 1.1]           # or {start = 1e-3, stop = 1e-1, num = 3, scale = "log"}
+    values = {}                       # the effect's other parameters, held fixed (default: defaults)
 
     [[pairs]]                         # two (or more) hidden effects at once, fixed sizes
     effects = ["jet_gain", "base_compliance"]
@@ -60,6 +61,7 @@ class EffectSweep(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     effect: str
     parameter: str
     sizes: list[float] | SizeRange
+    values: dict[str, float] = {}
 
 
 class EffectPair(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
@@ -83,7 +85,8 @@ class StudySpec(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
 class Study(msgspec.Struct, frozen=True):
     """A checked spec: effect specs resolved to absolute paths, sizes expanded.
 
-    sweeps: (effect spec, "effect.parameter", sizes, the parameter's default, its unit). pairs: (effect specs, values).
+    sweeps: (effect spec, "effect.parameter", sizes, the parameter's default, its unit, the
+    other parameters' fixed values). pairs: (effect specs, values).
     """
 
     name: str
@@ -95,7 +98,7 @@ class Study(msgspec.Struct, frozen=True):
     seeds: tuple[int, ...]
     noise_scales: tuple[float, ...]
     none: bool
-    sweeps: tuple[tuple[str, str, tuple[float, ...], float, str], ...]
+    sweeps: tuple[tuple[str, str, tuple[float, ...], float, str, tuple[tuple[str, float], ...]], ...]
     pairs: tuple[tuple[tuple[str, ...], tuple[tuple[str, float], ...]], ...]
 
 
@@ -120,7 +123,13 @@ def load_study(path: Path) -> Study:
             raise UserError(f"{source}: {key}.sizes is empty")
         for size in sizes:
             _check_bounds(parameter, size, source, f"{key}.sizes")
-        sweeps.append((effect_spec, f"{effect.name}.{parameter.name}", sizes, parameter.default, parameter.unit))
+        fixed = []
+        for name, value in sweep.values.items():
+            other = _parameter(effect, name, source, f"{key}.values.{name}")
+            _check_bounds(other, value, source, f"{key}.values.{name}")
+            fixed.append((f"{effect.name}.{name}", value))
+        sweeps.append((effect_spec, f"{effect.name}.{parameter.name}", sizes, parameter.default, parameter.unit,
+                       tuple(sorted(fixed))))
     pairs = []
     for index, pair in enumerate(spec.pairs):
         key = f"pairs[{index}]"
