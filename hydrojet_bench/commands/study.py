@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"{args.spec}: the spec has no cells (none = false and no effects or pairs)")
     folder = args.output or Path(f"study-{study.name}")
     store = RowStore(folder, ROW_COLUMNS, "cell_id")
-    where = args.scheduler or f"a local cluster of {args.workers} workers"
+    where = args.scheduler or f"a local cluster of {args.workers} worker{'s' if args.workers != 1 else ''}"
     console.print(f"study {study.name}: {len(cells)} cells on {where}, rows in {store.rows_folder}")
     outcome = run_tasks(lambda: dask_client(args.scheduler, args.workers), run_cell, cells,
                         [cell.id for cell in cells], store, error_row=cell_row, label="cells")
