@@ -121,8 +121,8 @@ def _confusion(folder: Path, rows: pd.DataFrame) -> Path:
     plans = sorted(rows["plan"].unique())
     truths = sorted(rows["truth"].unique())
     verdicts = sorted(rows["verdict"].unique())
-    figure, axes = plt.subplots(1, len(plans), figsize=(1.0 + 0.9 * len(verdicts) * len(plans) + 2.5,
-                                                        1.5 + 0.45 * len(truths)), squeeze=False)
+    size = (3.5 + 0.9 * len(verdicts) * len(plans), 2.5 + 0.45 * len(truths))
+    figure, axes = plt.subplots(1, len(plans), figsize=size, squeeze=False, layout="constrained")
     for axis, plan in zip(axes[0], plans):
         counts = pd.crosstab(rows[rows["plan"] == plan]["truth"], rows[rows["plan"] == plan]["verdict"]) \
             .reindex(index=truths, columns=verdicts, fill_value=0)
@@ -146,7 +146,8 @@ def _power(folder: Path, sweeps: pd.DataFrame) -> Path:
     parameters = sorted(sweeps["parameter"].unique())
     columns = min(3, len(parameters))
     lines = (len(parameters) + columns - 1) // columns
-    figure, axes = plt.subplots(lines, columns, figsize=(4.5 * columns, 3.4 * lines), squeeze=False)
+    figure, axes = plt.subplots(lines, columns, figsize=(4.5 * columns, 3.4 * lines), squeeze=False,
+                                layout="constrained")
     for axis, parameter in zip(axes.flat, parameters):
         group = sweeps[sweeps["parameter"] == parameter]
         for setting, part in group.groupby(SETTING):
@@ -171,7 +172,7 @@ def _power(folder: Path, sweeps: pd.DataFrame) -> Path:
 def _recovery(folder: Path, sweeps: pd.DataFrame) -> Path:
     recovered = sweeps[sweeps["recovery_z"].notna()]
     parameters = sorted(recovered["parameter"].unique())
-    figure, axis = plt.subplots(figsize=(max(5.0, 1.2 * len(parameters) + 2), 4.0))
+    figure, axis = plt.subplots(figsize=(max(5.0, 1.2 * len(parameters) + 2), 4.0), layout="constrained")
     data = [recovered[recovered["parameter"] == p]["recovery_z"].clip(-20, 20).to_numpy() for p in parameters]
     axis.boxplot(data, showfliers=True)
     axis.set_xticks(range(1, len(parameters) + 1), parameters, rotation=30, ha="right")
@@ -186,7 +187,7 @@ def _recovery(folder: Path, sweeps: pd.DataFrame) -> Path:
 def _plans(folder: Path, rows: pd.DataFrame) -> Path:
     single = rows[rows["kind"] != "pair"]
     table = single.pivot_table(index="truth", columns="plan", values="detected", aggfunc="mean")
-    figure, axis = plt.subplots(figsize=(max(6.0, 0.8 * len(table) + 2), 4.0))
+    figure, axis = plt.subplots(figsize=(max(6.0, 0.8 * len(table) + 2), 4.0), layout="constrained")
     width = 0.8 / max(len(table.columns), 1)
     for index, plan in enumerate(table.columns):
         axis.bar(np.arange(len(table)) + index * width, table[plan].to_numpy(), width, label=Path(plan).name)
