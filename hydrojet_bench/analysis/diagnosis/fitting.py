@@ -238,7 +238,10 @@ def fit_candidates(problem: Problem, candidates: Sequence[Effect], baseline: Fit
     count = len(candidates)
     workers = min(count, workers if workers is not None else default_workers())
     parallel = workers > 1 and "fork" in multiprocessing.get_all_start_methods()
-    graph = {("candidate", index): (_fit_candidate, index) for index in range(count)}
+    # Most parameters first: the slowest fits should not start last (Dask runs
+    # independent tasks in key order).
+    order = sorted(range(count), key=lambda index: -len(candidates[index].parameters))
+    graph = {("candidate", rank): (_fit_candidate, index) for rank, index in enumerate(order)}
 
     def finished(key, result, graph, state, worker) -> None:
         if progress and isinstance(result, Fit):
@@ -249,9 +252,14 @@ def fit_candidates(problem: Problem, candidates: Sequence[Effect], baseline: Fit
         with Callback(posttask=finished):
             if parallel:
                 with dask.config.set({"multiprocessing.context": "fork"}):
-                    fits = dask.multiprocessing.get(graph, list(graph), num_workers=workers)
+                    # One fit per dispatch: Dask's default batches of 6 would leave a
+                    # worker idle while the other works through its batch.
+                    fits = dask.multiprocessing.get(graph, list(graph), num_workers=workers, chunksize=1)
             else:
                 fits = dask.local.get_sync(graph, list(graph))
     finally:
         _WORK = None
-    return list(fits)
+    results: list[Fit | None] = [None] * count
+    for index, result in zip(order, fits):
+        results[index] = result
+    return results  # type: ignore[return-value]
