@@ -55,7 +55,8 @@ def expected_verdict(cell: Cell) -> str | None:
         return None
     if cell.kind == NONE:
         return NONE
-    return cell.truth if cell.effects[0] == cell.truth else UNEXPLAINED
+    from_file = ":" in cell.effects[0]  # library effects go by name, others by path/to/file.py:Class
+    return UNEXPLAINED if from_file else cell.truth
 
 
 def cell_row(cell: Cell, error: str | None = None) -> dict:

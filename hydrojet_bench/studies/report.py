@@ -172,14 +172,14 @@ def _power(folder: Path, sweeps: pd.DataFrame) -> Path:
 def _recovery(folder: Path, sweeps: pd.DataFrame) -> Path:
     recovered = sweeps[sweeps["recovery_z"].notna()]
     parameters = sorted(recovered["parameter"].unique())
-    figure, axis = plt.subplots(figsize=(max(5.0, 1.2 * len(parameters) + 2), 4.0), layout="constrained")
+    figure, axis = plt.subplots(figsize=(max(6.5, 1.4 * len(parameters) + 2), 4.5), layout="constrained")
     data = [recovered[recovered["parameter"] == p]["recovery_z"].clip(-20, 20).to_numpy() for p in parameters]
     axis.boxplot(data, showfliers=True)
-    axis.set_xticks(range(1, len(parameters) + 1), parameters, rotation=30, ha="right")
+    axis.set_xticks(range(1, len(parameters) + 1), parameters, rotation=30, ha="right", fontsize=8)
     axis.axhspan(-2.0, 2.0, color="C2", alpha=0.15, label="|z| <= 2")
     axis.axhline(0.0, color="k", linewidth=0.8)
-    axis.set_ylabel("(fitted - true) / standard error (clipped at +-20)")
-    axis.set_title("Parameter recovery of the hidden effect's swept parameter")
+    axis.set_ylabel("(fitted - true) / standard error")
+    axis.set_title("Recovery of the swept parameter (z clipped at +-20)")
     axis.legend(fontsize=8)
     return _save(figure, folder / "recovery.png")
 

@@ -13,13 +13,13 @@
 
     [[effects]]                       # one hidden effect, swept over sizes
     effect = "jet_gain"               # a library name or path/to/file.py:Class (relative to the spec)
-    parameter = "gain"                # the swept parameter, in the effect's own unit
+    parameter = "gain_1"              # the swept parameter, in the effect's own unit
     sizes = [0.8, 0.9, 1.1]           # or {start = 1e-3, stop = 1e-1, num = 3, scale = "log"}
     values = {}                       # the effect's other parameters, held fixed (default: defaults)
 
     [[pairs]]                         # two (or more) hidden effects at once, fixed sizes
     effects = ["jet_gain", "base_compliance"]
-    values = {"jet_gain.gain" = 1.2, "base_compliance.bending_rad_per_nm" = 5.0}
+    values = {"jet_gain.gain_1" = 0.8, "base_compliance.compliance_rad_per_nm" = 20.0}
 
 Every size is checked against the effect parameter's bounds; a mistake is a
 `UserError` naming the file and the dotted key.
