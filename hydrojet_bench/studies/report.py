@@ -20,6 +20,7 @@ matplotlib.use("Agg")  # files only
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+from matplotlib.ticker import NullFormatter  # noqa: E402
 
 from ..analysis.report import _save  # noqa: E402
 from ..errors import UserError  # noqa: E402
@@ -28,6 +29,8 @@ POWER_LEVEL = 0.9
 # Sizes spanning this ratio or more are plotted on a log axis.
 LOG_SPAN = 10.0
 SETTING = ["plan", "model", "orientation"]
+MARKERS = ("o", "s", "^", "D", "v", "P")
+DASHES = ("-", "--", ":", "-.")
 
 
 def write_report(rows: pd.DataFrame, folder: Path) -> list[Path]:
@@ -150,13 +153,17 @@ def _power(folder: Path, sweeps: pd.DataFrame) -> Path:
                                 layout="constrained")
     for axis, parameter in zip(axes.flat, parameters):
         group = sweeps[sweeps["parameter"] == parameter]
-        for setting, part in group.groupby(SETTING):
+        for line, (setting, part) in enumerate(group.groupby(SETTING)):
             rate = part.groupby("size")["detected"].mean()
-            axis.plot(rate.index, rate.to_numpy(), "o-", label=" / ".join(Path(s).name for s in setting))
+            # Settings often agree: markers and dashes that differ keep every line visible.
+            axis.plot(rate.index, rate.to_numpy(), marker=MARKERS[line % len(MARKERS)],
+                      linestyle=DASHES[line % len(DASHES)], markersize=8 - 1.5 * (line % 3),
+                      label=" / ".join(Path(s).name for s in setting))
         sizes = group["size"].abs()
         positive = sizes[sizes > 0]
         if len(positive) and (group["size"] > 0).all() and positive.max() / positive.min() >= LOG_SPAN:
             axis.set_xscale("log")
+            axis.xaxis.set_minor_formatter(NullFormatter())
         axis.axhline(POWER_LEVEL, color="0.5", linestyle=":", linewidth=0.8)
         axis.set_ylim(-0.05, 1.05)
         axis.set_xlabel(f"{parameter} ({group['unit'].iloc[0]})")
