@@ -71,13 +71,15 @@ def replay_log(task: LogTask) -> dict:
     """One row: the session log replayed with its live model and parameter timeline."""
     from ..analysis.compare import compare_steps
     from ..bench.replay import live_difference_deg, read_session, replay
-    from ..models import make_model
+    from ..model_choice import ModelDefaults, choose_model
 
     started = time.perf_counter()
     row = log_row(task, REPLAY_COLUMNS)
     try:
         session = read_session(Path(task.path), task.profile)
-        estimates = replay(session, make_model(session.model_name, session.effects), None, None)
+        # The live model and effects, as `replay` without options chooses them.
+        model = choose_model(None, (), None, ModelDefaults(session.model_name, session.effects)).model
+        estimates = replay(session, model, None, None)
         kept = [i for i, estimate in enumerate(estimates) if estimate is not None]
         validation = [i for i in kept if session.steps.sweep[i] >= 0] or kept
         if not validation:

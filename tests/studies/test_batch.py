@@ -51,11 +51,25 @@ def test_batch_diagnose_gives_one_row_per_log(logs: list[Path], tmp_path: Path):
     assert "weak_jet.csv" in result.stderr  # the table goes to stderr when JSON takes stdout
 
 
-def test_batch_replay_records_a_log_it_cannot_replay(logs: list[Path]):
-    result = batch("replay", str(logs[0]), "--json", "-", "--workers", "1")
+TINY_PLAN = "settle_s = 2.0\n" + "".join(
+    f"[[step]]\nq1 = {q1}\nq2 = {q2}\nq3 = 0.0\nsweep = {sweep}\nstep = {step}\n"
+    for q1, q2, sweep, step in ((0.02, 0.0, -1, 0), (0.0, 0.03, -1, 1), (0.04, 0.0, 0, 0), (0.0, 0.05, 0, 1)))
+
+
+def test_batch_replay_reproduces_the_live_estimates_and_records_a_csv_it_cannot_replay(logs: list[Path],
+                                                                                         tmp_path: Path):
+    plan = tmp_path / "tiny.toml"
+    plan.write_text(TINY_PLAN)
+    session = tmp_path / "session.mcap"
+    run = subprocess.run([sys.executable, "-m", "hydrojet_bench.cli", "run", "--plan", str(plan), "--no-live",
+                          "--time-scale", "10", "--log", str(session)], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    result = batch("replay", str(session), str(logs[0]), "--json", "-", "--workers", "1")
     assert result.returncode == 1
-    (row,) = json.loads(result.stdout)
-    assert row["error"] and "Traceback" not in row["error"] and row["validation_orientation_rmse_deg"] is None
+    replayed, failed = json.loads(result.stdout)
+    assert replayed["error"] is None and replayed["steps"] == 4 and replayed["model"] == "cosserat"
+    assert replayed["live_difference_deg"] == 0.0 and 0.0 < replayed["validation_orientation_rmse_deg"] < 10.0
+    assert failed["error"] and "Traceback" not in failed["error"] and failed["validation_orientation_rmse_deg"] is None
 
 
 def test_batch_of_a_missing_log_is_one_line(tmp_path: Path):
