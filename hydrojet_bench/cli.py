@@ -20,7 +20,7 @@ from . import __version__
 from .errors import ConvergenceError, UserError
 
 # Order is the order shown in --help.
-COMMAND_MODULES = ("run", "replay", "sensors", "simulate", "calibrate", "compare", "diagnose",
+COMMAND_MODULES = ("run", "replay", "sensors", "simulate", "calibrate", "compare", "diagnose", "study", "batch",
                    "perf", "emulate", "recover")
 
 

@@ -18,8 +18,8 @@ of the measured noise floors. Every row then carries the same noise, so the
 least-squares fit is the maximum-likelihood one and the sum of squares over sigma^2 is
 the chi-square a score can use.
 
-Candidates are fitted in worker processes (``workers``, forked, so effects loaded from
-user files travel along); each starts from the calibrated baseline with its own
+Candidates are fitted in worker processes (``workers``, forked by Dask's process
+scheduler, so effects loaded from user files travel along); each starts from the calibrated baseline with its own
 parameters at their defaults (which leave the model unchanged), so it only has to move
 away from an optimum it already shares.
 """
@@ -29,11 +29,13 @@ from __future__ import annotations
 import multiprocessing
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
-from contextlib import nullcontext
 from dataclasses import dataclass, replace
 
+import dask
+import dask.local
+import dask.multiprocessing
 import numpy as np
+from dask.callbacks import Callback
 
 from ...data.dataset import Dataset
 from ...effects import Effect, qualified_parameter_names
@@ -226,26 +228,38 @@ def fit_candidates(problem: Problem, candidates: Sequence[Effect], baseline: Fit
     candidate order.
 
     workers: processes (default `default_workers`); 1 fits in this process, as does a
-    platform without fork.
+    platform without fork. The fits run on Dask, the engine studies run on: its local
+    process scheduler here, whose forked pool starts in milliseconds (a distributed
+    `LocalCluster` takes seconds, as long as the whole diagnosis).
     """
     global _WORK
     if baseline.params is None:
         raise ValueError("the baseline fit failed; no candidate can start from it")
     count = len(candidates)
     workers = min(count, workers if workers is not None else default_workers())
-    # Most parameters first: the slowest fits should not start last.
-    order = sorted(range(count), key=lambda index: -len(candidates[index].parameters))
-    results: list[Fit | None] = [None] * count
     parallel = workers > 1 and "fork" in multiprocessing.get_all_start_methods()
+    # Most parameters first: the slowest fits should not start last (Dask runs
+    # independent tasks in key order).
+    order = sorted(range(count), key=lambda index: -len(candidates[index].parameters))
+    graph = {("candidate", rank): (_fit_candidate, index) for rank, index in enumerate(order)}
+
+    def finished(key, result, graph, state, worker) -> None:
+        if progress and isinstance(result, Fit):
+            progress(result)
+
     _WORK = (problem, tuple(candidates), baseline.params)
     try:
-        with (ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) if parallel
-              else nullcontext()) as pool:
-            fits = pool.map(_fit_candidate, order) if parallel else map(_fit_candidate, order)
-            for index, result in zip(order, fits):
-                results[index] = result
-                if progress:
-                    progress(result)
+        with Callback(posttask=finished):
+            if parallel:
+                with dask.config.set({"multiprocessing.context": "fork"}):
+                    # One fit per dispatch: Dask's default batches of 6 would leave a
+                    # worker idle while the other works through its batch.
+                    fits = dask.multiprocessing.get(graph, list(graph), num_workers=workers, chunksize=1)
+            else:
+                fits = dask.local.get_sync(graph, list(graph))
     finally:
         _WORK = None
+    results: list[Fit | None] = [None] * count
+    for index, result in zip(order, fits):
+        results[index] = result
     return results  # type: ignore[return-value]

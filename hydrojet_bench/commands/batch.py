@@ -1,0 +1,88 @@
+"""`hydrojet-bench batch diagnose LOGS...` and `batch replay LOGS...`: every log of a lab
+at once, on the study engine (Dask distributed: local worker processes, or a cluster
+with --scheduler). One row per log: a table on stdout, ``--json``, and Parquet rows
+under ``-o DIR`` (a rerun into the same DIR skips the logs already done).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import tempfile
+from pathlib import Path
+
+from rich.console import Console
+
+from ..errors import UserError
+from ..studies.batch import DIAGNOSE_COLUMNS, REPLAY_COLUMNS, LogTask, diagnose_log, log_row, replay_log
+from ..studies.engine import dask_client, run_tasks
+from ..studies.store import RowStore
+from . import render
+
+# Per action: the task, its columns, the columns shown in the table.
+ACTIONS = {
+    "diagnose": (diagnose_log, DIAGNOSE_COLUMNS,
+                 ("verdict", "alternatives", "baseline_heldout_rmse_deg", "noise_floor_deg", "seconds")),
+    "replay": (replay_log, REPLAY_COLUMNS,
+               ("model", "steps", "validation_orientation_rmse_deg", "live_difference_deg", "seconds")),
+}
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("batch", help="diagnose or replay many logs at once (Dask)")
+    actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    for action in ACTIONS:
+        sub = actions.add_parser(action, help=f"{action} every log, one row each")
+        sub.add_argument("logs", type=Path, nargs="+", metavar="LOG", help="CSV files or MCAP session logs")
+        sub.add_argument("--profile", help="rig profile for CSV files (default: sim; a session log brings its own)")
+        if action == "diagnose":
+            sub.add_argument("--model", default="cosserat", choices=("cosserat", "prb"),
+                             help="model to diagnose (default: cosserat)")
+        sub.add_argument("-o", "--output", type=Path, metavar="DIR", help="store the rows as Parquet under DIR")
+        sub.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask cluster (tcp://host:8786)")
+        sub.add_argument("--workers", type=int, default=2, help="local worker processes (default: 2)")
+        render.add_json_argument(sub, "the rows")
+        sub.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    function, columns, shown = ACTIONS[args.action]
+    missing = [str(path) for path in args.logs if not path.is_file()]
+    if missing:
+        raise UserError(f"{missing[0]}: no such log")
+    if args.workers < 1:
+        raise UserError(f"--workers must be at least 1, got {args.workers}")
+    tasks = [LogTask(str(path.resolve()), args.profile, getattr(args, "model", "cosserat")) for path in args.logs]
+    with tempfile.TemporaryDirectory(prefix="hydrojet-batch-") as scratch:
+        store = RowStore(args.output or Path(scratch), columns, "log_id")
+        run_tasks(lambda: dask_client(args.scheduler, args.workers), function, tasks, [task.id for task in tasks],
+                  store, error_row=lambda task, text: log_row(task, columns, text), label="logs")
+        table = store.table()
+    order = {task.path: index for index, task in enumerate(tasks)}
+    rows = sorted((_plain(row) for row in table.to_dict("records") if row["log"] in order),
+                  key=lambda row: order[row["log"]])
+    console = render.console_for(args)
+    view = render.table(f"batch {args.action}: {len(rows)} logs", labels=("log",), numbers=shown)
+    view.add_column("error")
+    for row in rows:
+        view.add_row(Path(row["log"]).name, *(_cell(row[name]) for name in shown), row["error"] or "")
+    console.print(view)
+    if args.output:
+        console.print(f"rows stored under {store.rows_folder}")
+    if args.json:
+        render.write_json(args.json, rows)
+    return 1 if any(row["error"] for row in rows) else 0
+
+
+def _plain(row: dict) -> dict:
+    """A pandas record as JSON-ready values: NaN and missing figures become None."""
+    return {key: None if isinstance(value, float) and math.isnan(value) else
+            (value.item() if hasattr(value, "item") else value) for key, value in row.items()}
+
+
+def _cell(value: object) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        return f"{value:.3f}"
+    return str(value)

@@ -1,0 +1,127 @@
+"""Running one cell: the twin with the hidden effect(s) at their sizes plays the plan,
+the recording is diagnosed as `hydrojet-bench diagnose` would, and the outcome is one
+flat row (see `ROW_COLUMNS`). Runs in a Dask worker; any exception becomes a row with
+the error text, so one bad scenario never stops a study.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import traceback
+
+from ..analysis.diagnosis import UNEXPLAINED, Diagnosis, DiagnosisSettings, diagnose
+from ..bench.plan_choice import choose_plan
+from ..effects import load_effect
+from ..plans import Plan, calibration_plan, validation_sweeps
+from ..profile import load_profile
+from ..twin import DigitalTwin, TwinConfig
+from .cells import NONE, Cell
+
+# The rod lying along the tracker's x axis: the base frame's z turned a quarter turn
+# about the tracker's y (w, x, y, z).
+HORIZONTAL_BASE_ORIENTATION = (math.sqrt(0.5), 0.0, math.sqrt(0.5), 0.0)
+# "short": 12 calibration poses and every jet swept twice (5 steps up, 5 down): the
+# smallest plan whose split still holds out a repetition of each sweep.
+SHORT_POSES, SHORT_STEPS_UP = 12, 5
+# The diagnosis averages each step over its last second: nothing earlier is recorded.
+RECORD_WINDOW_S = 1.0
+
+# Column name -> pyarrow type name (see `store`); every row has all of them.
+ROW_COLUMNS: dict[str, str] = {
+    "cell_id": "string", "scenario": "string", "kind": "string", "truth": "string", "truth_values": "string",
+    "parameter": "string", "size": "float64", "size_default": "float64", "unit": "string", "profile": "string", "orientation": "string", "plan": "string",
+    "model": "string", "seed": "int64", "noise_scale": "float64", "verdict": "string", "detected": "bool",
+    "alternatives": "string", "baseline_heldout_rmse_deg": "float64", "winner_heldout_rmse_deg": "float64",
+    "noise_floor_deg": "float64", "fitted": "string", "fitted_value": "float64",
+    "fitted_standard_error": "float64", "recovery_z": "float64", "converged": "bool", "seconds": "float64",
+    "error": "string",
+}
+
+
+def study_plan(name: str, seed: int) -> Plan:
+    """"short" (see `SHORT_POSES`), or any plan `choose_plan` knows (a built-in or a file)."""
+    if name == "short":
+        return calibration_plan(SHORT_POSES, seed=seed) + validation_sweeps(steps_up=SHORT_STEPS_UP, repetitions=2)
+    return choose_plan(name, seed=seed)
+
+
+def expected_verdict(cell: Cell) -> str | None:
+    """The verdict a perfect diagnosis gives: "none", the one library effect hidden, or
+    "unexplained" for an effect outside the library; None for a pair (any one of them
+    is a partial answer, see the report)."""
+    if cell.kind == "pair":
+        return None
+    if cell.kind == NONE:
+        return NONE
+    from_file = ":" in cell.effects[0]  # library effects go by name, others by path/to/file.py:Class
+    return UNEXPLAINED if from_file else cell.truth
+
+
+def cell_row(cell: Cell, error: str | None = None) -> dict:
+    """The row's columns that describe ``cell``, the outcome's left empty (None)."""
+    row = {column: None for column in ROW_COLUMNS}
+    row.update(cell_id=cell.id, scenario=cell.scenario, kind=cell.kind, truth=cell.truth,
+               truth_values=json.dumps(dict(cell.values)), parameter=cell.parameter or None, size=cell.size,
+               size_default=cell.size_default, unit=cell.unit or None,
+               profile=cell.profile, orientation=cell.orientation, plan=cell.plan, model=cell.model, seed=cell.seed,
+               noise_scale=cell.noise_scale, error=error)
+    return row
+
+
+def run_cell(cell: Cell) -> dict:
+    """One row for ``cell``; never raises."""
+    started = time.perf_counter()
+    row = cell_row(cell)
+    try:
+        row.update(_diagnosis_columns(cell, _simulate_and_diagnose(cell)))
+    except Exception as error:  # noqa: BLE001 - a cell's failure is data, the study goes on
+        last = traceback.extract_tb(error.__traceback__)[-1]
+        row["error"] = f"{type(error).__name__}: {error} ({last.filename.rpartition('/')[2]}:{last.lineno})"
+    row["seconds"] = time.perf_counter() - started
+    return row
+
+
+def _simulate_and_diagnose(cell: Cell) -> Diagnosis:
+    profile = load_profile(cell.profile)
+    changes: dict[str, object] = {
+        "hidden_effects": tuple(load_effect(spec) for spec in cell.effects),
+        "hidden_effect_values": cell.values,
+        "seed": cell.seed,
+    }
+    noise = profile.config.twin.noise
+    changes["noise"] = type(noise)(**{field: getattr(noise, field) * cell.noise_scale
+                                      for field in noise.__struct_fields__})
+    if cell.orientation == "horizontal":
+        changes["base_orientation_in_tracker"] = HORIZONTAL_BASE_ORIENTATION
+    config = TwinConfig.from_profile(profile, **changes)
+    recording = DigitalTwin(config).run_plan(study_plan(cell.plan, cell.seed), record_window_s=RECORD_WINDOW_S)
+    steps = recording.to_dataset(profile, f"study cell {cell.id}").quasistatic_steps()
+    # The study's engine already runs one cell per worker: no pool inside a cell.
+    return diagnose(steps, cell.model, settings=DiagnosisSettings(workers=1))
+
+
+def _diagnosis_columns(cell: Cell, diagnosis: Diagnosis) -> dict:
+    winner = diagnosis.winner
+    expected = expected_verdict(cell)
+    if expected is None:
+        detected = diagnosis.verdict in cell.truth.split("+")
+    else:
+        detected = diagnosis.verdict == expected
+    columns = {
+        "verdict": diagnosis.verdict, "detected": detected, "alternatives": ",".join(diagnosis.alternatives),
+        "baseline_heldout_rmse_deg": diagnosis.baseline_heldout_rmse_deg,
+        "winner_heldout_rmse_deg": None if winner is None else winner.heldout_orientation_rmse_deg,
+        "noise_floor_deg": diagnosis.noise_floor_deg,
+        "fitted": json.dumps({c.effect: {name: [value, error] for name, (value, error) in c.parameters.items()}
+                              for c in diagnosis.ranking if c.error is None}),
+        "converged": all(c.error is None for c in diagnosis.ranking),
+    }
+    if cell.kind == "sweep":
+        own = next((c for c in diagnosis.ranking if c.effect == cell.truth and c.error is None), None)
+        if own is not None and cell.parameter in own.parameters:
+            value, error = own.parameters[cell.parameter]
+            columns.update(fitted_value=value, fitted_standard_error=error,
+                           recovery_z=(value - cell.size) / error if error > 0 and math.isfinite(error) else None)
+    return columns

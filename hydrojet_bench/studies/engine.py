@@ -1,0 +1,99 @@
+"""Running many independent tasks on Dask distributed: a `LocalCluster` of worker
+processes by default, or an existing cluster by its scheduler's address
+(``dask scheduler`` / ``dask worker``), with the same code.
+
+Each finished task's row goes to the `RowStore` at once; ids already stored are skipped,
+so a rerun resumes and a killed run loses only the tasks in flight. A rich progress bar
+on stderr shows done/total, rate, ETA and failures.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, \
+    TimeRemainingColumn
+
+from ..errors import UserError
+from .store import RowStore
+
+# A scheduler that does not answer within this is a wrong address, not a slow cluster.
+CONNECT_TIMEOUT_S = 10
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What a run did: tasks submitted, skipped (already stored), failed (rows with an
+    error), and its wall time (s)."""
+
+    submitted: int
+    skipped: int
+    failed: int
+    wall_s: float
+
+    @property
+    def cells_per_minute(self) -> float:
+        return 60.0 * self.submitted / self.wall_s if self.wall_s > 0 else 0.0
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = None, workers: int = 2) -> Iterator[Any]:
+    """A distributed ``Client``: on the cluster at ``scheduler`` (``tcp://host:port``),
+    else on a fresh `LocalCluster` of ``workers`` single-threaded processes, closed on
+    exit."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError) as error:
+            raise UserError(f"--scheduler {scheduler}: cannot connect ({error})") from None
+        with client:
+            yield client
+        return
+    if workers < 1:
+        raise UserError(f"--workers must be at least 1, got {workers}")
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        yield client
+
+
+def run_tasks(connect: Callable[[], contextlib.AbstractContextManager[Any]], function: Callable[[Any], dict],
+              items: Sequence[Any], ids: Sequence[str], store: RowStore, *, error_row: Callable[[Any, str], dict],
+              label: str = "cells", console: Console | None = None) -> Outcome:
+    """Run ``function(item)`` for every item whose id is not stored yet, storing each row
+    as it arrives. ``connect()`` gives the client (see `dask_client`), only called when
+    there is work left. ``error_row(item, text)`` makes the row of a task that raised (or
+    whose worker died)."""
+    from distributed import as_completed
+
+    started = time.perf_counter()
+    done = store.finished()
+    todo = [(item, key) for item, key in zip(items, ids) if key not in done]
+    if not todo:
+        return Outcome(submitted=0, skipped=len(items), failed=0, wall_s=time.perf_counter() - started)
+    failed = 0
+    console = console or Console(stderr=True)
+    columns = (TextColumn(f"[bold]{label}"), BarColumn(), MofNCompleteColumn(),
+               TextColumn("{task.fields[rate]}"), TextColumn("ETA"), TimeRemainingColumn(),
+               TextColumn("{task.fields[failures]} failed"), TimeElapsedColumn())
+    with connect() as client, Progress(*columns, console=console, transient=False) as progress:
+        task = progress.add_task(label, total=len(todo), rate="-", failures=0)
+        futures = {client.submit(function, item, key=f"{label}-{key}", pure=False): item for item, key in todo}
+        for count, future in enumerate(as_completed(futures), start=1):
+            try:
+                row = future.result()
+            except Exception as error:  # noqa: BLE001 - a lost worker or an unpicklable row: record, go on
+                row = error_row(futures[future], f"{type(error).__name__}: {error}")
+            if row.get("error"):
+                failed += 1
+            store.append(row)
+            elapsed = time.perf_counter() - started
+            progress.update(task, advance=1, failures=failed, rate=f"{60.0 * count / elapsed:.1f}/min")
+    return Outcome(submitted=len(todo), skipped=len(items) - len(todo), failed=failed,
+                   wall_s=time.perf_counter() - started)

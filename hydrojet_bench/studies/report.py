@@ -1,0 +1,207 @@
+"""A study's report: figures (PNG) and ``summary.md`` from its rows.
+
+* confusion matrix, hidden truth x verdict, one panel per plan;
+* detection power against effect size per swept effect parameter: the share of cells
+  (seeds, noise levels ...) whose verdict is right, one line per plan/model/orientation,
+  log x when the sizes span a decade or more; the smallest size detected in at least
+  `POWER_LEVEL` of the cells is the protocol's detection limit;
+* parameter recovery: fitted minus true over the fit's standard error (a z score) of the
+  swept parameter, per effect, when the diagnosis fitted it;
+* plans side by side: the share of right verdicts per hidden truth and plan.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+from matplotlib.ticker import NullFormatter  # noqa: E402
+
+from ..analysis.report import _save  # noqa: E402
+from ..errors import UserError  # noqa: E402
+
+POWER_LEVEL = 0.9
+# Sizes spanning this ratio or more are plotted on a log axis.
+LOG_SPAN = 10.0
+SETTING = ["plan", "model", "orientation"]
+MARKERS = ("o", "s", "^", "D", "v", "P")
+DASHES = ("-", "--", ":", "-.")
+
+
+def write_report(rows: pd.DataFrame, folder: Path) -> list[Path]:
+    """Write the figures and ``summary.md`` into ``folder``; returns their paths."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise UserError(f"cannot create report folder {folder}: {error.strerror}") from None
+    finished = rows[rows["error"].isna()]
+    paths = []
+    if len(finished):
+        paths += [_confusion(folder, finished), _plans(folder, finished)]
+        sweeps = finished[finished["kind"] == "sweep"]
+        if len(sweeps):
+            paths.append(_power(folder, sweeps))
+        if sweeps["recovery_z"].notna().any():
+            paths.append(_recovery(folder, sweeps))
+    summary = folder / "summary.md"
+    summary.write_text(summary_markdown(rows))
+    return paths + [summary]
+
+
+def confusion_table(rows: pd.DataFrame) -> pd.DataFrame:
+    """Counts of cells by hidden truth (rows) and verdict (columns)."""
+    return pd.crosstab(rows["truth"], rows["verdict"])
+
+
+def detection_limits(sweeps: pd.DataFrame) -> pd.DataFrame:
+    """Per swept parameter and setting: the detection rate at each size and the
+    smallest size detected in at least `POWER_LEVEL` of the cells (NaN: never)."""
+    power = (sweeps.groupby(["truth", "parameter", *SETTING, "size"])["detected"].agg(["mean", "count"])
+             .reset_index())
+    limits = []
+    for key, group in power.groupby(["truth", "parameter", *SETTING]):
+        reached = group[group["mean"] >= POWER_LEVEL]
+        default = sweeps[sweeps["parameter"] == key[1]]["size_default"].iloc[0]
+        limits.append((*key, _smallest(reached["size"], default), len(group), int(group["count"].sum())))
+    return pd.DataFrame(limits, columns=["truth", "parameter", *SETTING, "smallest_detected", "sizes", "cells"])
+
+
+def _smallest(sizes: pd.Series, default: float) -> float:
+    """The size closest to the parameter's default (its "no effect" value)."""
+    if sizes.empty:
+        return float("nan")
+    return float(sizes.loc[(sizes - default).abs().idxmin()])
+
+
+def summary_markdown(rows: pd.DataFrame) -> str:
+    failed = rows[rows["error"].notna()]
+    finished = rows[rows["error"].isna()]
+    lines = ["# Study summary", "",
+             f"{len(rows)} cells: {len(finished)} diagnosed, {len(failed)} failed; "
+             f"{finished['seconds'].mean() if len(finished) else float('nan'):.1f} s per cell on average "
+             f"(one worker's time).", ""]
+    if len(finished):
+        right = finished[finished["kind"] != "pair"]["detected"].mean()
+        lines += [f"Right verdicts (single effects and none): {right:.0%}.", "",
+                  "## Confusion matrix (cells; rows: hidden truth, columns: verdict)", "",
+                  _markdown(confusion_table(finished).reset_index()), ""]
+        sweeps = finished[finished["kind"] == "sweep"]
+        if len(sweeps):
+            limits = detection_limits(sweeps)
+            lines += [f"## Detection limits (smallest size detected in >= {POWER_LEVEL:.0%} of the cells; "
+                      "sizes in the parameter's own unit, NaN: never)", "", _markdown(limits), ""]
+            recovered = sweeps[sweeps["recovery_z"].notna()]
+            if len(recovered):
+                stats = recovered.groupby("parameter")["recovery_z"].agg(
+                    median="median", within_2=lambda z: float((z.abs() <= 2).mean()), cells="count").reset_index()
+                lines += ["## Parameter recovery ((fitted - true) / standard error)", "", _markdown(stats), ""]
+        by_plan = finished[finished["kind"] != "pair"].pivot_table(index="truth", columns="plan", values="detected",
+                                                                  aggfunc="mean")
+        lines += ["## Plans side by side (share of right verdicts)", "", _markdown(by_plan.reset_index()), ""]
+    if len(failed):
+        lines += ["## Failed cells", "", _markdown(failed[["scenario", "seed", "plan", "model", "error"]]), ""]
+    return "\n".join(lines)
+
+
+def _markdown(table: pd.DataFrame) -> str:
+    def text(value: object) -> str:
+        if isinstance(value, float):
+            return "NaN" if np.isnan(value) else f"{value:.4g}"
+        return str(value).replace("|", "\\|")
+
+    header = "| " + " | ".join(str(c) for c in table.columns) + " |"
+    rule = "|" + "---|" * len(table.columns)
+    body = ["| " + " | ".join(text(v) for v in row) + " |" for row in table.itertuples(index=False)]
+    return "\n".join([header, rule, *body])
+
+
+def _confusion(folder: Path, rows: pd.DataFrame) -> Path:
+    plans = sorted(rows["plan"].unique())
+    truths = sorted(rows["truth"].unique())
+    verdicts = sorted(rows["verdict"].unique())
+    size = (3.5 + 0.9 * len(verdicts) * len(plans), 2.5 + 0.45 * len(truths))
+    figure, axes = plt.subplots(1, len(plans), figsize=size, squeeze=False, layout="constrained")
+    for axis, plan in zip(axes[0], plans):
+        counts = pd.crosstab(rows[rows["plan"] == plan]["truth"], rows[rows["plan"] == plan]["verdict"]) \
+            .reindex(index=truths, columns=verdicts, fill_value=0)
+        share = counts.div(counts.sum(axis=1).replace(0, 1), axis=0)
+        image = axis.imshow(share.to_numpy(), cmap="Blues", vmin=0.0, vmax=1.0, aspect="auto")
+        for (i, j), count in np.ndenumerate(counts.to_numpy()):
+            if count:
+                axis.text(j, i, str(count), ha="center", va="center",
+                          color="white" if share.iat[i, j] > 0.6 else "black", fontsize=8)
+        axis.set_xticks(range(len(verdicts)), verdicts, rotation=45, ha="right")
+        axis.set_yticks(range(len(truths)), truths)
+        axis.set_xlabel("verdict")
+        axis.set_ylabel("hidden truth")
+        axis.set_title(f"plan {Path(plan).name}")
+    figure.colorbar(image, ax=axes[0].tolist(), label="share of the truth's cells")
+    figure.suptitle("Diagnosis: hidden truth x verdict (cell counts)")
+    return _save(figure, folder / "confusion.png")
+
+
+def _power(folder: Path, sweeps: pd.DataFrame) -> Path:
+    parameters = sorted(sweeps["parameter"].unique())
+    columns = min(3, len(parameters))
+    lines = (len(parameters) + columns - 1) // columns
+    figure, axes = plt.subplots(lines, columns, figsize=(4.5 * columns, 3.4 * lines), squeeze=False,
+                                layout="constrained")
+    for axis, parameter in zip(axes.flat, parameters):
+        group = sweeps[sweeps["parameter"] == parameter]
+        for line, (setting, part) in enumerate(group.groupby(SETTING)):
+            rate = part.groupby("size")["detected"].mean()
+            # Settings often agree: markers and dashes that differ keep every line visible.
+            axis.plot(rate.index, rate.to_numpy(), marker=MARKERS[line % len(MARKERS)],
+                      linestyle=DASHES[line % len(DASHES)], markersize=8 - 1.5 * (line % 3),
+                      label=" / ".join(Path(s).name for s in setting))
+        sizes = group["size"].abs()
+        positive = sizes[sizes > 0]
+        if len(positive) and (group["size"] > 0).all() and positive.max() / positive.min() >= LOG_SPAN:
+            axis.set_xscale("log")
+            axis.xaxis.set_minor_formatter(NullFormatter())
+        axis.axhline(POWER_LEVEL, color="0.5", linestyle=":", linewidth=0.8)
+        axis.set_ylim(-0.05, 1.05)
+        axis.set_xlabel(f"{parameter} ({group['unit'].iloc[0]})")
+        axis.set_ylabel("share detected")
+        axis.set_title(group["truth"].iloc[0])
+        axis.legend(fontsize=7, title="plan / model / rod", title_fontsize=7)
+    for axis in list(axes.flat)[len(parameters):]:
+        axis.set_visible(False)
+    figure.suptitle(f"Detection power against effect size (dotted: {POWER_LEVEL:.0%})")
+    return _save(figure, folder / "power.png")
+
+
+def _recovery(folder: Path, sweeps: pd.DataFrame) -> Path:
+    recovered = sweeps[sweeps["recovery_z"].notna()]
+    parameters = sorted(recovered["parameter"].unique())
+    figure, axis = plt.subplots(figsize=(max(6.5, 1.4 * len(parameters) + 2), 4.5), layout="constrained")
+    data = [recovered[recovered["parameter"] == p]["recovery_z"].clip(-20, 20).to_numpy() for p in parameters]
+    axis.boxplot(data, showfliers=True)
+    axis.set_xticks(range(1, len(parameters) + 1), parameters, rotation=30, ha="right", fontsize=8)
+    axis.axhspan(-2.0, 2.0, color="C2", alpha=0.15, label="|z| <= 2")
+    axis.axhline(0.0, color="k", linewidth=0.8)
+    axis.set_ylabel("(fitted - true) / standard error")
+    axis.set_title("Recovery of the swept parameter (z clipped at +-20)")
+    axis.legend(fontsize=8)
+    return _save(figure, folder / "recovery.png")
+
+
+def _plans(folder: Path, rows: pd.DataFrame) -> Path:
+    single = rows[rows["kind"] != "pair"]
+    table = single.pivot_table(index="truth", columns="plan", values="detected", aggfunc="mean")
+    figure, axis = plt.subplots(figsize=(max(6.0, 0.8 * len(table) + 2), 4.0), layout="constrained")
+    width = 0.8 / max(len(table.columns), 1)
+    for index, plan in enumerate(table.columns):
+        axis.bar(np.arange(len(table)) + index * width, table[plan].to_numpy(), width, label=Path(plan).name)
+    axis.set_xticks(np.arange(len(table)) + 0.4 - width / 2, table.index, rotation=30, ha="right")
+    axis.set_ylim(0, 1.05)
+    axis.set_ylabel("share of right verdicts")
+    axis.set_xlabel("hidden truth")
+    axis.set_title("Plans side by side: right verdicts per hidden truth")
+    axis.legend(title="plan", fontsize=8)
+    return _save(figure, folder / "plans.png")

@@ -1,0 +1,184 @@
+"""A study's TOML spec, typed: which scenarios to simulate and diagnose.
+
+::
+
+    name = "smoke"                    # default: the file name without .toml
+    profiles = ["sim"]                # rig profiles (shipped names or paths)
+    orientations = ["hanging"]        # "hanging" (clamp above, rod down) and/or "horizontal"
+    plans = ["short"]                 # "short", "paper", another built-in plan or a plan file
+    models = ["cosserat"]             # diagnosing models: "cosserat", "prb"
+    seeds = [0, 1, 2]                 # twin noise seeds
+    noise_scales = [1.0]              # multiples of the profile's EM noise
+    none = true                       # also run every scenario with no hidden effect
+
+    [[effects]]                       # one hidden effect, swept over sizes
+    effect = "jet_gain"               # a library name or path/to/file.py:Class (relative to the spec)
+    parameter = "gain_1"              # the swept parameter, in the effect's own unit
+    sizes = [0.8, 0.9, 1.1]           # or {start = 1e-3, stop = 1e-1, num = 3, scale = "log"}
+    values = {}                       # the effect's other parameters, held fixed (default: defaults)
+
+    [[pairs]]                         # two (or more) hidden effects at once, fixed sizes
+    effects = ["jet_gain", "base_compliance"]
+    values = {"jet_gain.gain_1" = 0.8, "base_compliance.compliance_rad_per_nm" = 20.0}
+
+Every size is checked against the effect parameter's bounds; a mistake is a
+`UserError` naming the file and the dotted key.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Literal
+
+import msgspec
+import numpy as np
+
+from ..config.loading import convert, read_toml
+from ..effects import Effect, load_effect
+from ..errors import UserError
+from ..models import MODELS
+
+Orientation = Literal["hanging", "horizontal"]
+Positive = Annotated[float, msgspec.Meta(gt=0.0)]
+
+
+class SizeRange(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """``num`` sizes from ``start`` to ``stop`` (both included), evenly spaced on a
+    ``log`` or ``linear`` scale, in the parameter's own unit."""
+
+    start: float
+    stop: float
+    num: Annotated[int, msgspec.Meta(ge=1)]
+    scale: Literal["log", "linear"] = "linear"
+
+    def values(self) -> tuple[float, ...]:
+        if self.scale == "log":
+            return tuple(float(v) for v in np.geomspace(self.start, self.stop, self.num))
+        return tuple(float(v) for v in np.linspace(self.start, self.stop, self.num))
+
+
+class EffectSweep(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    effect: str
+    parameter: str
+    sizes: list[float] | SizeRange
+    values: dict[str, float] = {}
+
+
+class EffectPair(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    effects: Annotated[list[str], msgspec.Meta(min_length=2)]
+    values: dict[str, float] = {}
+
+
+class StudySpec(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    name: str = ""
+    profiles: Annotated[list[str], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: ["sim"])
+    orientations: Annotated[list[Orientation], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: ["hanging"])
+    plans: Annotated[list[str], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: ["short"])
+    models: Annotated[list[str], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: ["cosserat"])
+    seeds: Annotated[list[Annotated[int, msgspec.Meta(ge=0)]], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: [0])
+    noise_scales: Annotated[list[Positive], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: [1.0])
+    none: bool = True
+    effects: list[EffectSweep] = []
+    pairs: list[EffectPair] = []
+
+
+class Study(msgspec.Struct, frozen=True):
+    """A checked spec: effect specs resolved to absolute paths, sizes expanded.
+
+    sweeps: (effect spec, "effect.parameter", sizes, the parameter's default, its unit, the
+    other parameters' fixed values). pairs: (effect specs, values).
+    """
+
+    name: str
+    source: str
+    profiles: tuple[str, ...]
+    orientations: tuple[str, ...]
+    plans: tuple[str, ...]
+    models: tuple[str, ...]
+    seeds: tuple[int, ...]
+    noise_scales: tuple[float, ...]
+    none: bool
+    sweeps: tuple[tuple[str, str, tuple[float, ...], float, str, tuple[tuple[str, float], ...]], ...]
+    pairs: tuple[tuple[tuple[str, ...], tuple[tuple[str, float], ...]], ...]
+
+
+def load_study(path: Path) -> Study:
+    """The study spec at ``path``, checked (`UserError` naming file and key)."""
+    source = str(path)
+    spec = convert(read_toml(path, "study spec"), StudySpec, source)
+    folder = path.parent
+    for index, model in enumerate(spec.models):
+        if model not in MODELS:
+            raise UserError(f"{source}: models[{index}] = {model!r} is no model; known: {', '.join(MODELS)}")
+    profiles = tuple(_relative(name, folder, suffix=".toml") for name in spec.profiles)
+    plans = tuple(_relative(name, folder) for name in spec.plans)
+    sweeps = []
+    for index, sweep in enumerate(spec.effects):
+        key = f"effects[{index}]"
+        effect_spec = _effect_spec(sweep.effect, folder)
+        effect = _load(effect_spec, source, f"{key}.effect")
+        parameter = _parameter(effect, sweep.parameter, source, f"{key}.parameter")
+        sizes = sweep.sizes.values() if isinstance(sweep.sizes, SizeRange) else tuple(sweep.sizes)
+        if not sizes:
+            raise UserError(f"{source}: {key}.sizes is empty")
+        for size in sizes:
+            _check_bounds(parameter, size, source, f"{key}.sizes")
+        fixed = []
+        for name, value in sweep.values.items():
+            other = _parameter(effect, name, source, f"{key}.values.{name}")
+            _check_bounds(other, value, source, f"{key}.values.{name}")
+            fixed.append((f"{effect.name}.{name}", value))
+        sweeps.append((effect_spec, f"{effect.name}.{parameter.name}", sizes, parameter.default, parameter.unit,
+                       tuple(sorted(fixed))))
+    pairs = []
+    for index, pair in enumerate(spec.pairs):
+        key = f"pairs[{index}]"
+        specs = tuple(_effect_spec(name, folder) for name in pair.effects)
+        effects = [_load(s, source, f"{key}.effects[{i}]") for i, s in enumerate(specs)]
+        known = {f"{e.name}.{p.name}": p for e in effects for p in e.parameters}
+        for name, value in pair.values.items():
+            if name not in known:
+                raise UserError(f"{source}: {key}.values.{name}: no parameter of {', '.join(e.name for e in effects)}; "
+                                f"known: {', '.join(sorted(known))}")
+            _check_bounds(known[name], value, source, f"{key}.values.{name}")
+        pairs.append((specs, tuple(sorted(pair.values.items()))))
+    return Study(name=spec.name or path.stem, source=source, profiles=profiles,
+                 orientations=tuple(spec.orientations), plans=plans, models=tuple(spec.models),
+                 seeds=tuple(spec.seeds), noise_scales=tuple(spec.noise_scales), none=spec.none,
+                 sweeps=tuple(sweeps), pairs=tuple(pairs))
+
+
+def _relative(name: str, folder: Path, suffix: str = "") -> str:
+    """A file named relative to the spec's folder as an absolute path; a built-in name as is."""
+    candidate = folder / name
+    if candidate.is_file() and (not suffix or candidate.suffix == suffix):
+        return str(candidate.resolve())
+    return name
+
+
+def _effect_spec(spec: str, folder: Path) -> str:
+    path, colon, name = spec.rpartition(":")
+    if not colon or Path(path).is_absolute():
+        return spec
+    return f"{(folder / path).resolve()}:{name}"
+
+
+def _load(spec: str, source: str, key: str) -> Effect:
+    try:
+        return load_effect(spec)
+    except UserError as error:
+        raise UserError(f"{source}: {key}: {error}") from None
+
+
+def _parameter(effect: Effect, name: str, source: str, key: str):
+    for parameter in effect.parameters:
+        if parameter.name == name:
+            return parameter
+    known = ", ".join(p.name for p in effect.parameters) or "none"
+    raise UserError(f"{source}: {key} = {name!r} is no parameter of {effect.name}; known: {known}")
+
+
+def _check_bounds(parameter, value: float, source: str, key: str) -> None:
+    if not parameter.lower <= value <= parameter.upper:
+        raise UserError(f"{source}: {key}: {value} is outside {parameter.name}'s bounds "
+                        f"[{parameter.lower}, {parameter.upper}] {parameter.unit}")

@@ -1,0 +1,37 @@
+"""`study` on a LocalCluster of 2 workers: every cell diagnosed, a failing cell recorded
+with its error while the others finish, the report written and rebuilt."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from study_helpers import run_study, stored_rows
+
+
+def test_local_cluster_records_every_cell_and_the_failing_one(spec_with_boom: Path, tmp_path: Path):
+    out = tmp_path / "out"
+    result = run_study(str(spec_with_boom), "-o", str(out), "--workers", "2", "--csv")
+    assert result.returncode == 0, result.stderr
+    rows = stored_rows(out)
+    assert len(rows) == 6 and rows["cell_id"].is_unique
+    failed = rows[rows["error"].notna()]
+    assert sorted(failed["truth"]) == ["boom", "boom"]
+    assert all("boom inside the twin" in text for text in failed["error"])
+    good = rows[rows["error"].isna()]
+    assert set(good["truth"]) == {"none", "jet_gain"}
+    assert good["verdict"].notna().all() and (good["seconds"] > 0).all()
+    # A 30 % weaker jet is far above the noise: the short plan finds it, and names nothing without it.
+    assert (good[good["truth"] == "jet_gain"]["verdict"] == "jet_gain").all()
+    assert (good[good["truth"] == "none"]["verdict"] == "none").all()
+    assert "6 cells run (0 already done), 2 failed" in " ".join(result.stdout.split())
+    assert (out / "rows.csv").read_text().count("\n") == 7
+    report = out / "report"
+    for name in ("confusion.png", "power.png", "plans.png", "summary.md"):
+        assert (report / name).stat().st_size > 0
+    summary = (report / "summary.md").read_text()
+    assert "| jet_gain | 2 | 0 |" in summary and "boom inside the twin" in summary
+
+    (report / "summary.md").unlink()
+    rebuilt = run_study("--report-only", str(out))
+    assert rebuilt.returncode == 0, rebuilt.stderr
+    assert (report / "summary.md").read_text() == summary

@@ -1,0 +1,43 @@
+"""Resume: a study killed (SIGKILL, its cluster with it) mid-run loses only the cells in
+flight; rerunning the same spec into the same folder skips the finished ones."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+from study_helpers import TINY, run_study, stored_rows, study_command, write_spec
+
+FIRST_ROW_TIMEOUT_S = 120.0
+
+
+def test_a_killed_study_resumes_where_it_stopped(tmp_path: Path):
+    spec = write_spec(tmp_path, TINY.replace("seeds = [0, 1]", "seeds = [0, 1, 2]"))
+    out = tmp_path / "out"
+    rows_folder = out / "rows"
+    process = subprocess.Popen(study_command(str(spec), "-o", str(out), "--workers", "1"),
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + FIRST_ROW_TIMEOUT_S
+        while not list(rows_folder.glob("*.parquet")):
+            assert process.poll() is None, "the study ended before it stored a row"
+            assert time.monotonic() < deadline, "no row stored in time"
+            time.sleep(0.1)
+    finally:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait(timeout=30)
+    finished = {path: path.stat().st_mtime_ns for path in rows_folder.glob("*.parquet")}
+    assert 1 <= len(finished) < 6
+
+    result = run_study(str(spec), "-o", str(out), "--workers", "2")
+    assert result.returncode == 0, result.stderr
+    assert f"{6 - len(finished)} cells run ({len(finished)} already done)" in " ".join(result.stdout.split())
+    rows = stored_rows(out)
+    assert len(rows) == 6 and rows["cell_id"].is_unique and rows["error"].isna().all()
+    assert {path: path.stat().st_mtime_ns for path in finished} == finished
+
+    again = run_study(str(spec), "-o", str(out), "--workers", "1")
+    assert "0 cells run (6 already done)" in " ".join(again.stdout.split())

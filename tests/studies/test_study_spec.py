@@ -1,0 +1,64 @@
+"""Spec mistakes name the file and the dotted key; cells have stable, distinct ids."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from study_helpers import TINY, WITH_BOOM, run_study, write_spec
+
+from hydrojet_bench.errors import UserError
+from hydrojet_bench.studies.cells import expand
+from hydrojet_bench.studies.spec import load_study
+
+
+@pytest.mark.parametrize(("body", "message"), [
+    ('seeds = [0]\ncolour = "red"\n', "colour"),
+    ('seeds = [0]\n[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [2.0]\n',
+     "effects[0].sizes: 2.0 is outside gain_1's bounds [0.0, 1.5]"),
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_9"\nsizes = [1.0]\n',
+     "effects[0].parameter = 'gain_9' is no parameter of jet_gain"),
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = {start = 0.5, stop = 1.0}\n',
+     "effects[0].sizes"),
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = {start = 0.5, stop = 1.0, num = 3, '
+     'scale = "cubic"}\n', "effects[0].sizes.scale"),
+    ('[[effects]]\neffect = "nothing_like_it"\nparameter = "x"\nsizes = [1.0]\n',
+     "effects[0].effect: unknown effect 'nothing_like_it'"),
+    ('models = ["lumped"]\n', "models[0] = 'lumped' is no model"),
+    ('orientations = ["upside-down"]\n', "orientations[0]"),
+    ('[[pairs]]\neffects = ["jet_gain", "base_compliance"]\nvalues = {"jet_gain.gain_1" = 9.0}\n',
+     "pairs[0].values.jet_gain.gain_1: 9.0 is outside"),
+    ('[[pairs]]\neffects = ["jet_gain"]\n', "pairs[0].effects"),
+])
+def test_spec_mistakes_name_file_and_key(tmp_path: Path, body: str, message: str):
+    spec = write_spec(tmp_path, body, "bad.toml")
+    with pytest.raises(UserError) as caught:
+        load_study(spec)
+    text = str(caught.value)
+    assert text.startswith(str(spec)) and message in text and "\n" not in text
+
+
+def test_a_spec_mistake_on_the_command_line_is_one_line(tmp_path: Path):
+    spec = write_spec(tmp_path, 'seeds = [0]\ncolour = "red"\n', "bad.toml")
+    result = run_study(str(spec), "-o", str(tmp_path / "out"))
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert str(spec) in " ".join(result.stderr.split())
+
+
+def test_sizes_as_a_range_in_the_effects_own_units(tmp_path: Path):
+    spec = write_spec(tmp_path, 'none = false\n[[effects]]\neffect = "base_compliance"\n'
+                                'parameter = "compliance_rad_per_nm"\nsizes = {start = 1, stop = 100, num = 3, '
+                                'scale = "log"}\n')
+    cells = expand(load_study(spec))
+    assert [cell.size for cell in cells] == pytest.approx([1.0, 10.0, 100.0])
+    assert {cell.unit for cell in cells} == {"rad/(N m)"} and {cell.size_default for cell in cells} == {0.0}
+
+
+def test_cell_ids_are_stable_and_distinct(tmp_path: Path):
+    spec = write_spec(tmp_path, WITH_BOOM)
+    first, second = expand(load_study(spec)), expand(load_study(spec))
+    assert [cell.id for cell in first] == [cell.id for cell in second]
+    assert len({cell.id for cell in first}) == len(first) == 6
+    assert {cell.truth for cell in first} == {"none", "jet_gain", "boom"}
+    reordered = write_spec(tmp_path, TINY.replace("seeds = [0, 1]", "seeds = [1, 0]"), "reordered.toml")
+    assert {cell.id for cell in expand(load_study(reordered))} == {cell.id for cell in first if cell.truth != "boom"}
