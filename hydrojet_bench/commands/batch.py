@@ -11,7 +11,6 @@ import math
 import tempfile
 from pathlib import Path
 
-from rich.console import Console
 
 from ..errors import UserError
 from ..studies.batch import DIAGNOSE_COLUMNS, REPLAY_COLUMNS, LogTask, diagnose_log, log_row, replay_log
