@@ -28,19 +28,23 @@ def refuse_existing(path: Path, what: str) -> UserError:
 
 
 def check_writable_target(path: Path, what: str, *, overwrite: bool) -> None:
-    """Refuse a ``path`` that is a directory, or (unless ``overwrite``) that exists, with
-    one line; create its missing parent folders (as ``run --log`` always has)."""
+    """Refuse, with one line, a ``path`` that is a directory, whose folder is missing, or
+    (unless ``overwrite``) that exists; ``what`` names the file (e.g. "session log")."""
     path = Path(path)
     if path.is_dir():
         raise UserError(f"{path}: is a directory; give the {what} a file name")
+    if not path.parent.is_dir():
+        raise UserError(f"{path}: cannot write the {what}: its folder {path.parent} does not exist")
     if path.exists() and not overwrite:
         raise refuse_existing(path, what)
+
+
+def make_folder_for(path: Path) -> None:
+    """Create the missing folders above ``path``, or say in one line why not."""
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
     except OSError as error:
-        raise UserError(f"{path}: cannot create its folder {path.parent}: {error.strerror or error}") from None
-    if not path.parent.is_dir():
-        raise UserError(f"{path}: its folder {path.parent} is not a directory")
+        raise UserError(f"{path}: cannot create its folder {Path(path).parent}: {error.strerror or error}") from None
 
 
 def create_new(path: Path, what: str, *, overwrite: bool = False) -> BinaryIO:
@@ -59,6 +63,7 @@ def create_numbered(path: Path, what: str, attempts: int = 1000) -> Path:
     """Reserve a new, empty file at ``path``, or at ``stem-1.suffix``, ``stem-2.suffix``...
     if taken (e.g. by a session started in the same second), and return its path."""
     path = Path(path)
+    make_folder_for(path)
     check_writable_target(path, what, overwrite=True)
     for number in range(attempts):
         candidate = path if number == 0 else path.with_name(f"{path.stem}-{number}{path.suffix}")

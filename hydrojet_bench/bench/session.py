@@ -10,8 +10,8 @@ settle time, averages the end of the step, and then:
 * on every step: predicts it with the calibrated constant disturbance ("ref") and, with
   online estimation on, corrects w_d|m from the measurement (eq. 4).
 
-Devices come from `bench.rig.open_rig`. Exit paths: the valve driver sends ALL_OFF when
-its context exits, whatever the reason (plan done, exception, cancellation by
+Devices come from `bench.rig.open_rig`. Exit paths: the valve driver sends ALL_OFF (logged
+on ``/valves/command``) when its context exits, whatever the reason (plan done, exception, cancellation by
 SIGINT/SIGTERM); the firmware's watchdog covers a host that dies without exiting. The
 log is finished on every path but a hard kill, after which `hydrojet-bench recover`
 salvages it up to its last flushed chunk.
@@ -101,6 +101,7 @@ class SessionRequest:
     calibration_names: tuple[str, ...] = PARAMETER_NAMES
     seed: int | None = None
     command_line: str = ""
+    overwrite_log: bool = False  # replace an existing log_path (else refused, see LogWriter)
 
 
 @dataclass
@@ -174,8 +175,8 @@ class Session:
             "settings": repr(request.settings),
         }}
         completed = 0
-        with LogWriter(request.log_path, metadata=metadata,
-                       flush_interval_s=request.settings.session.flush_interval_s) as log:
+        with LogWriter(request.log_path, metadata=metadata, flush_interval_s=request.settings.session.flush_interval_s,
+                       overwrite=request.overwrite_log) as log:
             self._log = log
             self._write_parameters()
             try:
@@ -209,19 +210,25 @@ class Session:
         async with open_rig(request.profile, request.settings, self.clock, seed=request.seed,
                             before_arming=self._load_kernels, on_event=self.event) as rig:
             self._devices = rig.simulated
-            async with asyncio.TaskGroup() as group:
-                streams = [group.create_task(self._em_stream(rig.tracker), name="em-stream")]
-                if rig.imus is not None:
-                    streams.append(group.create_task(self._imu_stream(rig.imus), name="imu-stream"))
-                try:
-                    return await self._play(rig.valves)
-                finally:
-                    # Python 3.11's wait_for can swallow a cancellation that arrives as its
-                    # inner future completes (the IMU reads complete all the time), so the
-                    # streams also stop on this flag.
-                    self._stopping = True
-                    for task in streams:
-                        task.cancel()
+            try:
+                async with asyncio.TaskGroup() as group:
+                    streams = [group.create_task(self._em_stream(rig.tracker), name="em-stream")]
+                    if rig.imus is not None:
+                        streams.append(group.create_task(self._imu_stream(rig.imus), name="imu-stream"))
+                    try:
+                        return await self._play(rig.valves)
+                    finally:
+                        # Python 3.11's wait_for can swallow a cancellation that arrives as its
+                        # inner future completes (the IMU reads complete all the time), so the
+                        # streams also stop on this flag.
+                        self._stopping = True
+                        for task in streams:
+                            task.cancel()
+            finally:
+                # The valve driver sends ALL_OFF as the rig closes, on every exit path; the
+                # log must show that the valves were closed, and when.
+                self._log.write(ValveCommand(t_s=self.clock.now(), command="ALL_OFF",
+                                             duties_permille=(0.0, 0.0, 0.0), jet_forces_n=(0.0, 0.0, 0.0)))
 
     async def _load_kernels(self) -> None:
         """The first solve of a process loads the compiled kernels (about a second; far

@@ -16,6 +16,7 @@ from ..model_choice import COSSERAT, model_choice
 from ..params_io import ParameterFile, write_parameter_file
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
+from .log_notice import warn_if_incomplete
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -33,6 +34,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.position_weight >= 0:
         raise UserError(f"--position-weight must be >= 0, got {args.position_weight}")
     profile, steps = load_steps(args.input, args.profile)
+    warn_if_incomplete(args.input)
     choice = model_choice(args)
     model = choice.model
     try:
