@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .data import Dataset, read_csv
 from .errors import UserError
+from .files import check_regular_input
 from .logs import dataset_from_log
 from .profile import RigProfile, load_profile
 
@@ -22,6 +23,7 @@ def load_dataset(path: str | Path, profile: RigProfile | str | Path | None) -> D
         profile embedded in it when None.
     """
     path = Path(path)
+    check_regular_input(path)  # a FIFO would block the reader forever
     suffix = path.suffix.lower()
     if suffix == ".mcap":
         return dataset_from_log(path, profile)
