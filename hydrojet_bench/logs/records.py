@@ -35,8 +35,10 @@ _OPCODES = frozenset(int(opcode) for opcode in Opcode)
 # A record longer than this is a damaged length field, not a session log.
 _MAX_RECORD_LENGTH = 1 << 40
 
-# Records the bench reads (messages too, parsed apart: they need their length); the rest
-# (indexes, statistics, summary offsets) are skipped: they only repeat the data section.
+# Records the scanner parses (messages too, parsed apart: they need their length), each
+# also to check that its fields fill its length exactly; of them it yields `_WANTED`. The
+# indexes and statistics only repeat the data section (the summary's are read for what
+# damage cost).
 _PARSERS = {
     Opcode.HEADER: Header.read, Opcode.FOOTER: Footer.read, Opcode.SCHEMA: Schema.read,
     Opcode.CHANNEL: Channel.read, Opcode.METADATA: Metadata.read, Opcode.CHUNK: Chunk.read,
@@ -155,12 +157,14 @@ def _record_at(data: bytes, position: int, *, open_chunks: bool) -> tuple[int, l
     end = position + _RECORD_HEAD.size + length
     if opcode not in _OPCODES or end > len(data) or not _plausible_head(data, end):
         return None
-    if opcode not in _WANTED:
+    if opcode not in _PARSERS and opcode != Opcode.MESSAGE:
         return opcode, [], end
-    records = _parse(opcode, data, position, end)  # a chunk is opened to check its CRC even when not wanted
+    # Parsed even when not wanted, to check the length (and a chunk's CRC).
+    records = _parse(opcode, data, position, end)
     if records is None:
         return None
-    return opcode, records if open_chunks or opcode != Opcode.CHUNK else [], end
+    wanted = opcode in _WANTED and (open_chunks or opcode != Opcode.CHUNK)
+    return opcode, records if wanted else [], end
 
 
 def _plausible_head(data: bytes, position: int) -> bool:
@@ -215,6 +219,8 @@ def _parse(opcode: int, data: bytes, position: int, end: int) -> list[McapRecord
     try:
         stream = ReadDataStream(BytesIO(body))
         record = Message.read(stream, len(body)) if opcode == Opcode.MESSAGE else _PARSERS[opcode](stream)
+        if stream.count != len(body):
+            return None  # a damaged length: the record's own fields say it is longer or shorter
         if isinstance(record, Chunk):
             return breakup_chunk(record, validate_crc=True)
         return [record]
