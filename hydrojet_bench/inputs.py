@@ -23,7 +23,6 @@ def load_dataset(path: str | Path, profile: RigProfile | str | Path | None) -> D
         profile embedded in it when None.
     """
     path = Path(path)
-    check_regular_input(path)  # a FIFO would block the reader forever
     suffix = path.suffix.lower()
     if suffix == ".mcap":
         return dataset_from_log(path, profile)
@@ -35,4 +34,5 @@ def load_dataset(path: str | Path, profile: RigProfile | str | Path | None) -> D
                         "name such as 'sim') for gravity, sensor mountings and the rod")
     if not isinstance(profile, RigProfile):
         profile = load_profile(profile)
+    check_regular_input(path)  # a FIFO would block the reader forever
     return read_csv(path, profile)

@@ -127,9 +127,11 @@ class _Recording:
         return None
 
 
-@pytest.mark.parametrize("command", [["recover"], ["replay"], ["calibrate", "-o", "p.toml"]])
-def test_a_fifo_as_input_is_refused_not_waited_on(tmp_path: Path, capsys, command: list[str]) -> None:
-    fifo = tmp_path / "session.mcap"
+@pytest.mark.parametrize(("name", "command"), [("session.mcap", ["recover"]), ("session.mcap", ["replay"]),
+                                               ("session.mcap", ["calibrate", "-o", "p.toml"]),
+                                               ("data.csv", ["calibrate", "-o", "p.toml"])])
+def test_a_fifo_as_input_is_refused_not_waited_on(tmp_path: Path, capsys, name: str, command: list[str]) -> None:
+    fifo = tmp_path / name
     os.mkfifo(fifo)
     assert main([command[0], str(fifo), *command[1:]]) == 2
     assert f"{fifo}: cannot read: it is a FIFO; expected a regular file" in one_line(capsys)
