@@ -117,9 +117,13 @@ def test_every_variant_reads_as_a_part_of_the_whole(recorded: Recorded) -> None:
 
 
 def sample(recorded: Recorded, command: str) -> list[Variant]:
+    """Every variant, or a seeded sample holding damaged and cut logs both."""
     if EVERY_VARIANT:
         return list(recorded.variants)
-    return random.Random(f"{SEED}-{command}").sample(list(recorded.variants), SAMPLE_PER_COMMAND)
+    rng = random.Random(f"{SEED}-{command}")
+    damaged = [variant for variant in recorded.variants if variant.damaged]
+    cut = [variant for variant in recorded.variants if not variant.damaged]
+    return rng.sample(damaged, SAMPLE_PER_COMMAND - 1) + rng.sample(cut, 1)
 
 
 def digest(path: Path) -> str:
