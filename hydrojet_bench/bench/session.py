@@ -20,6 +20,7 @@ salvages it up to its last flushed chunk.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import time
 from collections import deque
@@ -208,27 +209,32 @@ class Session:
     async def _run_devices(self) -> int:
         request = self.request
         async with open_rig(request.profile, request.settings, self.clock, seed=request.seed,
-                            before_arming=self._load_kernels, on_event=self.event) as rig:
+                            before_arming=self._load_kernels, on_event=self.event) as rig, \
+                self._all_off_on_record():
             self._devices = rig.simulated
-            try:
-                async with asyncio.TaskGroup() as group:
-                    streams = [group.create_task(self._em_stream(rig.tracker), name="em-stream")]
-                    if rig.imus is not None:
-                        streams.append(group.create_task(self._imu_stream(rig.imus), name="imu-stream"))
-                    try:
-                        return await self._play(rig.valves)
-                    finally:
-                        # Python 3.11's wait_for can swallow a cancellation that arrives as its
-                        # inner future completes (the IMU reads complete all the time), so the
-                        # streams also stop on this flag.
-                        self._stopping = True
-                        for task in streams:
-                            task.cancel()
-            finally:
-                # The valve driver sends ALL_OFF as the rig closes, on every exit path; the
-                # log must show that the valves were closed, and when.
-                self._log.write(ValveCommand(t_s=self.clock.now(), command="ALL_OFF",
-                                             duties_permille=(0.0, 0.0, 0.0), jet_forces_n=(0.0, 0.0, 0.0)))
+            async with asyncio.TaskGroup() as group:
+                streams = [group.create_task(self._em_stream(rig.tracker), name="em-stream")]
+                if rig.imus is not None:
+                    streams.append(group.create_task(self._imu_stream(rig.imus), name="imu-stream"))
+                try:
+                    return await self._play(rig.valves)
+                finally:
+                    # Python 3.11's wait_for can swallow a cancellation that arrives as its
+                    # inner future completes (the IMU reads complete all the time), so the
+                    # streams also stop on this flag.
+                    self._stopping = True
+                    for task in streams:
+                        task.cancel()
+
+    @contextlib.asynccontextmanager
+    async def _all_off_on_record(self):
+        """Entered right after the rig, so it exits right before the rig closes and its
+        valve driver sends ALL_OFF, on every exit path: the log shows the valves closed."""
+        try:
+            yield
+        finally:
+            self._log.write(ValveCommand(t_s=self.clock.now(), command="ALL_OFF", duties_permille=(0.0, 0.0, 0.0),
+                                         jet_forces_n=(0.0, 0.0, 0.0)))
 
     async def _load_kernels(self) -> None:
         """The first solve of a process loads the compiled kernels (about a second; far
