@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..plans import CALIBRATION_SWEEP
 from .reader import LogDamage, read_log
 from .topics import Sample, Step
 
@@ -60,4 +61,4 @@ def log_condition(path: str | Path) -> LogCondition:
     except (KeyError, ValueError):
         planned = steps[0].count if steps else None
     return LogCondition(Path(path), contents.truncated, contents.damage, planned, len(steps),
-                        sum(step.sweep == -1 for step in steps))
+                        sum(step.sweep == CALIBRATION_SWEEP for step in steps))
