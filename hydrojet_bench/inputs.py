@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .data import Dataset, read_csv
 from .errors import UserError
+from .files import check_regular_input
 from .logs import dataset_from_log
 from .profile import RigProfile, load_profile
 
@@ -33,4 +34,5 @@ def load_dataset(path: str | Path, profile: RigProfile | str | Path | None) -> D
                         "name such as 'sim') for gravity, sensor mountings and the rod")
     if not isinstance(profile, RigProfile):
         profile = load_profile(profile)
+    check_regular_input(path)  # a FIFO would block the reader forever
     return read_csv(path, profile)

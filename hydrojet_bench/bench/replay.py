@@ -59,7 +59,6 @@ class LoggedSession:
     step_times_s: np.ndarray
     parameters: tuple[ParameterRecord, ...]
     live_errors: dict[tuple[int, str], float]
-    truncated: bool
 
 
 def read_session(path: Path, profile: RigProfile | str | Path | None = None) -> LoggedSession:
@@ -93,7 +92,7 @@ def read_session(path: Path, profile: RigProfile | str | Path | None = None) -> 
     live = {(m.index, m.method): m.orientation_error_deg for m in contents.on(ModelPrediction)}
     return LoggedSession(Path(path), rig, bench.get("model", "cosserat"), tuple(json.loads(bench.get("effects", "[]"))),
                          steps, np.array([row.index for row in records]), np.array([r.t_s for r in records]),
-                         parameters, live, contents.truncated)
+                         parameters, live)
 
 
 def logged_steps(path: Path, profile: RigProfile | str | Path | None = None) -> Dataset | None:

@@ -10,8 +10,8 @@ settle time, averages the end of the step, and then:
 * on every step: predicts it with the calibrated constant disturbance ("ref") and, with
   online estimation on, corrects w_d|m from the measurement (eq. 4).
 
-Devices come from `bench.rig.open_rig`. Exit paths: the valve driver sends ALL_OFF when
-its context exits, whatever the reason (plan done, exception, cancellation by
+Devices come from `bench.rig.open_rig`. Exit paths: the valve driver sends ALL_OFF (logged
+on ``/valves/command``) when its context exits, whatever the reason (plan done, exception, cancellation by
 SIGINT/SIGTERM); the firmware's watchdog covers a host that dies without exiting. The
 log is finished on every path but a hard kill, after which `hydrojet-bench recover`
 salvages it up to its last flushed chunk.
@@ -20,6 +20,7 @@ salvages it up to its last flushed chunk.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import time
 from collections import deque
@@ -102,6 +103,7 @@ class SessionRequest:
     seed: int | None = None
     command_line: str = ""
     warnings: tuple[str, ...] = ()  # about the request (say, clipped plan steps): logged as events at the start
+    overwrite_log: bool = False  # replace an existing log_path (else refused, see LogWriter)
 
 
 @dataclass
@@ -175,8 +177,8 @@ class Session:
             "settings": repr(request.settings),
         }}
         completed = 0
-        with LogWriter(request.log_path, metadata=metadata,
-                       flush_interval_s=request.settings.session.flush_interval_s) as log:
+        with LogWriter(request.log_path, metadata=metadata, flush_interval_s=request.settings.session.flush_interval_s,
+                       overwrite=request.overwrite_log) as log:
             self._log = log
             self._write_parameters()
             for warning in request.warnings:
@@ -211,7 +213,8 @@ class Session:
     async def _run_devices(self) -> int:
         request = self.request
         async with open_rig(request.profile, request.settings, self.clock, seed=request.seed,
-                            before_arming=self._load_kernels, on_event=self.event) as rig:
+                            before_arming=self._load_kernels, on_event=self.event) as rig, \
+                self._all_off_on_record():
             self._devices = rig.simulated
             async with asyncio.TaskGroup() as group:
                 streams = [group.create_task(self._em_stream(rig.tracker), name="em-stream")]
@@ -226,6 +229,16 @@ class Session:
                     self._stopping = True
                     for task in streams:
                         task.cancel()
+
+    @contextlib.asynccontextmanager
+    async def _all_off_on_record(self):
+        """Entered right after the rig, so it exits right before the rig closes and its
+        valve driver sends ALL_OFF, on every exit path: the log shows the valves closed."""
+        try:
+            yield
+        finally:
+            self._log.write(ValveCommand(t_s=self.clock.now(), command="ALL_OFF", duties_permille=(0.0, 0.0, 0.0),
+                                         jet_forces_n=(0.0, 0.0, 0.0)))
 
     async def _load_kernels(self) -> None:
         """The first solve of a process loads the compiled kernels (about a second; far

@@ -16,13 +16,15 @@ from ..model_choice import COSSERAT, model_choice
 from ..params_io import ParameterFile, write_parameter_file
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
+from .log_notice import warn_if_incomplete
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("calibrate", help="fit model parameters to the calibration poses")
     add_input_arguments(parser)
     add_model_arguments(parser, default=COSSERAT.model)
-    parser.add_argument("-o", "--output", type=Path, required=True, help="parameter file to write (TOML)")
+    parser.add_argument("-o", "--output", type=Path, required=True, help="parameter file to write (TOML); replaced if it exists: it is derived "
+                        "from the data, and calibrating again is meant to update it")
     parser.add_argument("--position-weight", type=float, default=DEFAULT_POSITION_WEIGHT_RAD_PER_M,
                         metavar="RAD_PER_M", help="weight of tip position errors when positions were "
                         f"measured (default {DEFAULT_POSITION_WEIGHT_RAD_PER_M:g}; 0 = orientation only)")
@@ -33,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.position_weight >= 0:
         raise UserError(f"--position-weight must be >= 0, got {args.position_weight}")
     profile, steps = load_steps(args.input, args.profile)
+    warn_if_incomplete(args.input)
     if len(steps.calibration_rows()) == 0:
         raise UserError(f"{args.input}: no calibration poses (steps of sweep -1) to fit on; record some "
                         "with `hydrojet-bench run --plan calibration`")

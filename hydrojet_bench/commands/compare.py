@@ -30,6 +30,7 @@ from ..model_choice import ModelChoice, choose_model, model_choice
 from ..models.shooting import ShootingModel
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
+from .log_notice import warn_if_incomplete
 
 LABELS = {"ref": "Ref.", "online": "Proposed"}
 BREAKDOWN_KEYS = ("by_jet", "by_direction", "by_region", "loading_unloading", "over_time", "worst_poses")
@@ -75,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
     # them, Ref. and Proposed are the live figures.
     logged = logged_steps(args.input, args.profile) if Path(args.input).suffix.lower() == ".mcap" else None
     profile, steps = (logged.profile, logged) if logged is not None else load_steps(args.input, args.profile)
+    log_damage = warn_if_incomplete(args.input)
     validation = steps.select(steps.sweep >= 0) if (steps.sweep >= 0).any() else steps
     if len(validation) == 0:
         raise UserError(f"{args.input}: no steps to compare")
@@ -93,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     if before is not None:
         print_before_after(console, before, after)
     if args.json:
-        write_json(args.json, validation, after, before)
+        write_json(args.json, validation, after, before, log_damage)
     if args.report:
         from ..analysis.report import write_report
 
@@ -282,8 +284,10 @@ def figures(evaluation: Evaluation, steps: Dataset) -> dict:
     return document
 
 
-def write_json(path: Path, steps: Dataset, evaluation: Evaluation, baseline: Evaluation | None = None) -> None:
+def write_json(path: Path, steps: Dataset, evaluation: Evaluation, baseline: Evaluation | None = None,
+               log_damage: dict | None = None) -> None:
     document = figures(evaluation, steps)
+    document["log_damage"] = log_damage
     if baseline is not None:
         document["baseline"] = figures(baseline, steps)
     render.write_json(path, document)

@@ -24,6 +24,7 @@ from ..errors import ConvergenceError, UserError
 from ..model_choice import COSSERAT, ModelChoice, model_choice
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
+from .log_notice import warn_if_incomplete
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -48,11 +49,12 @@ def run(args: argparse.Namespace) -> int:
     choice = model_choice(args)  # validates --effect before the data is read
     candidates = tuple(load_effect(spec) for spec in dict.fromkeys(args.candidate)) or None
     profile, steps = load_steps(args.input, args.profile)
+    log_damage = warn_if_incomplete(args.input)
     console = render.console_for(args)
     diagnosis = _diagnose(args, profile, steps, choice, candidates, Console(stderr=True))
     print_diagnosis(console, diagnosis, args)
     if args.json:
-        render.write_json(args.json, {"data": str(args.input), **diagnosis.as_dict()})
+        render.write_json(args.json, {"data": str(args.input), **diagnosis.as_dict(), "log_damage": log_damage})
     if args.report:
         from ..analysis.diagnosis.plots import write_diagnosis_report
 

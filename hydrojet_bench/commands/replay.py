@@ -20,6 +20,7 @@ from ..estimation.calibration import calibrate_dataset
 from ..model_choice import ModelDefaults, model_choice
 from . import render
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
+from .log_notice import warn_if_incomplete
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -37,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
     from .compare import print_tables
 
     session = read_session(args.input, args.profile)
+    warn_if_incomplete(args.input)
     console = render.console_for(args)
     choice = model_choice(args, ModelDefaults(session.model_name, session.effects))
     model = choice.model
@@ -54,9 +56,6 @@ def run(args: argparse.Namespace) -> int:
                       f"{calibration.rms_orientation_deg_before:.2f} -> {calibration.rms_orientation_deg_after:.2f} deg")
     online = OnlineSettings() if args.online else None
     estimates = replay(session, model, online, params)
-    if session.truncated:
-        console.print(f"[yellow]{render.plain(args.input)} is truncated: replaying the {len(session.steps)} "
-                      "steps before the cut[/]")
     kept = [i for i, estimate in enumerate(estimates) if estimate is not None]
     validation = [i for i in kept if session.steps.sweep[i] >= 0] or kept
     if not validation:

@@ -24,6 +24,7 @@ from rich.console import Console
 
 from ..config.schema import MAX_TIME_SCALE
 from ..errors import UserError
+from ..files import check_writable_target, create_numbered, make_folder_for
 from ..model_choice import ModelDefaults, model_choice
 from ..profile import load_profile
 from . import render
@@ -39,7 +40,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="paper (default), calibration[:COUNT], sweeps, imu-vs-em, hold[:SECONDS], or a .csv/.toml "
                              "plan file")
     parser.add_argument("--log", type=Path, metavar="FILE",
-                        help=f"MCAP log to write (default: {DEFAULT_LOG_DIR}/<profile>-<time>.mcap)")
+                        help=f"MCAP log to write, a new file (default: {DEFAULT_LOG_DIR}/<profile>-<time>.mcap, "
+                             "with -1, -2... added if a session started in the same second)")
+    parser.add_argument("--overwrite", action="store_true", help="replace the --log file if it exists")
     add_model_arguments(parser, default="the profile's [estimator] model",
                         params="start from these calibrated parameters (default: the profile's nominal ones)")
     parser.add_argument("--no-calibration", action="store_true",
@@ -73,16 +76,23 @@ def run(args: argparse.Namespace) -> int:
     choice = model_choice(args, ModelDefaults(settings.estimator.model, tuple(settings.estimator.effects),
                                               origin=f"{profile.source} (estimator.effects)"))
     model, requested = choice.model, choice.requested
-    log_path = args.log or DEFAULT_LOG_DIR / f"{profile.name}-{time.strftime('%Y%m%d-%H%M%S')}.mcap"
-    try:
-        log_path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise UserError(f"cannot create the log folder {log_path.parent}: {error.strerror}") from None
+    if args.log is not None:
+        # Refused here, before the session starts; the log writer's exclusive create
+        # settles a race with another process.
+        make_folder_for(args.log)
+        check_writable_target(args.log, "session log", overwrite=args.overwrite)
+        log_path, overwrite = args.log, args.overwrite
+    else:
+        # Reserved (created empty, exclusively) so that a session started in the same
+        # second gets another name; the session then writes its reservation.
+        log_path = create_numbered(DEFAULT_LOG_DIR / f"{profile.name}-{time.strftime('%Y%m%d-%H%M%S')}.mcap",
+                                   "session log")
+        overwrite = True
     request = SessionRequest(profile=profile, settings=settings, plan=plan, log_path=log_path, model=model,
                              effects=choice.effect_specs, params=choice.parameters(profile.model_parameters()),
                              calibrate=not args.no_calibration, calibration_names=choice.calibration_names,
                              seed=args.seed, warnings=(clipped_warning,) if clipped_warning else (),
-                             command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]))
+                             command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]), overwrite_log=overwrite)
     console = render.console_for(args)
     rig = "simulated rig" if settings.transports.simulated else "rig"
     console.print(f"session on [bold]{render.plain(profile.name)}[/] ({rig}): "

@@ -31,6 +31,7 @@ from ..logs.topics import Sample
 from ..model_choice import ModelDefaults, model_choice
 from . import render
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
+from .log_notice import warn_if_incomplete
 
 SHORT_LABELS = {"ref": "Ref.", "online_em": "Proposed, fed by EM", "online_imu": "Proposed, fed by IMU"}
 
@@ -59,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
         if value is not None and not (np.isfinite(value) and value >= 0):
             raise UserError(f"--{option.replace('_', '-')} must be a number of seconds >= 0, got {value}")
     em, imu, metadata = load_sources(args.input, args.profile)
+    log_damage = warn_if_incomplete(args.input)
     console = render.console_for(args)
     try:
         agreement = sensor_agreement(imu, em, args.max_gap, args.min_hold, args.settle)
@@ -71,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         render.write_json(args.json, {
             "log": str(args.input), **agreement.as_dict(),
-            "online_estimation": None if estimation is None else {"model": model_line, **estimation.as_dict()}})
+            "online_estimation": None if estimation is None else {"model": model_line, **estimation.as_dict()},
+            "log_damage": log_damage})
     if args.report:
         for path in write_sensor_report(args.report, agreement):
             console.print(f"wrote {render.plain(path)}")

@@ -1,4 +1,4 @@
-"""Reading session logs, complete or cut off: `read_log` and `read_metadata`."""
+"""Reading session logs, complete, cut off or damaged: `read_log` and `read_metadata`."""
 
 from __future__ import annotations
 
@@ -20,6 +20,50 @@ Record = TypeVar("Record", bound=LogRecord)
 
 
 @dataclass(frozen=True)
+class LogDamage:
+    """What a damaged log lost; the readers kept everything else.
+
+    skipped_stretches: damaged stretches of the file skipped (each up to the next intact
+        chunk); skipped_bytes: their total size, bytes.
+    chunks_lost: chunks in them; messages_lost: messages in them, all topics (None if
+        the damage took the file's indexes too).
+    lost_spans_s: ((from_t_s, to_t_s), ...): session times, s, between which messages
+        are missing (None at an end that has no intact message).
+    undecodable_messages: whole messages of the topics read that their record type
+        could not read, skipped.
+    """
+
+    skipped_stretches: int
+    skipped_bytes: int
+    chunks_lost: int
+    messages_lost: int | None
+    lost_spans_s: tuple[tuple[float | None, float | None], ...]
+    undecodable_messages: int
+
+    def describe(self) -> str:
+        """One line: what was lost."""
+        parts = []
+        if self.skipped_stretches:
+            messages = "an unknown number of" if self.messages_lost is None else str(self.messages_lost)
+            spans = ", ".join(f"{_time(start)} to {_time(end)}" for start, end in self.lost_spans_s)
+            parts.append(f"{self.chunks_lost} damaged chunk(s) skipped ({self.skipped_bytes} bytes, {messages} "
+                         f"messages, session time {spans})")
+        if self.undecodable_messages:
+            parts.append(f"{self.undecodable_messages} unreadable message(s) skipped")
+        return "; ".join(parts)
+
+    def as_dict(self) -> dict[str, object]:
+        return {"skipped_stretches": self.skipped_stretches, "skipped_bytes": self.skipped_bytes,
+                "chunks_lost": self.chunks_lost, "messages_lost": self.messages_lost,
+                "lost_spans_s": [list(span) for span in self.lost_spans_s],
+                "undecodable_messages": self.undecodable_messages}
+
+
+def _time(t_s: float | None) -> str:
+    return "?" if t_s is None else f"{t_s:.3f} s"
+
+
+@dataclass(frozen=True)
 class LogContents:
     """What a log holds.
 
@@ -27,16 +71,18 @@ class LogContents:
         ``topic`` names its topic, its ``t_s`` is its session time, s.
     metadata: the writer's named metadata records, e.g. ``metadata["bench"]["profile_name"]``.
     truncated: True unless the file ended properly (footer and closing magic), i.e. the
-        writer was killed or the file was cut or damaged; everything whole before the
-        damage is kept.
+        writer was killed or the file was cut (or damaged at its end); everything whole
+        before the cut is kept.
     start_time_unix_s: wall-clock time of ``t_s = 0``, s since the Unix epoch (None if the
         file does not say).
+    damage: what damage inside the file cost (None if there was none).
     """
 
     messages: list[LogRecord]
     metadata: dict[str, dict[str, str]]
     truncated: bool
     start_time_unix_s: float | None = None
+    damage: LogDamage | None = None
 
     def on(self, record_type: type[Record]) -> list[Record]:
         """The messages of one topic, given by its record type, in file order."""
@@ -52,11 +98,13 @@ def start_time_ns(metadata: dict[str, str]) -> int | None:
 
 
 def read_log(path: str | Path, topics: Iterable[str] | None = None) -> LogContents:
-    """Every whole message of a session log (of ``topics`` only, if given), complete or
-    truncated, as records. Raises `UserError` for a file that is not MCAP, `LogError`
-    naming the file, topic and field for a message its record type cannot read, and
-    ValueError for a topic not in `TOPICS`. Channels of other topics or not in JSON
-    (another program's MCAP) are skipped."""
+    """Every whole message of a session log (of ``topics`` only, if given), complete,
+    truncated or damaged, as records. A damaged chunk, or a message its record type
+    cannot read, is skipped and counted in `LogContents.damage`. Raises `UserError` for a
+    file that is not MCAP, `LogError` naming the file, topic and field when not one
+    message of a topic can be read (a log of another format, not damage), and ValueError
+    for a topic not in `TOPICS`. Channels of other topics or not in JSON (another
+    program's MCAP) are skipped."""
     wanted = None if topics is None else set(topics)
     unknown = sorted((wanted or set()) - TOPICS.keys())
     if unknown:
@@ -67,6 +115,9 @@ def read_log(path: str | Path, topics: Iterable[str] | None = None) -> LogConten
     start_ns: int | None = None
     first_log_time: int | None = None
     messages: list[LogRecord] = []
+    read_on: dict[str, int] = {}
+    unreadable: dict[str, LogError] = {}
+    undecodable = 0
     for record in scanner:
         if isinstance(record, Metadata):
             if record.name == LOG_METADATA_NAME:
@@ -84,11 +135,40 @@ def read_log(path: str | Path, topics: Iterable[str] | None = None) -> LogConten
                 continue
             try:
                 messages.append(decode(topic, record.data))
+                read_on[topic] = read_on.get(topic, 0) + 1
             except LogError as error:
+                undecodable += 1
                 log_time_s = (record.log_time - (first_log_time if start_ns is None else start_ns)) / _NS_PER_S
-                raise LogError(f"{path}, message at t_s={log_time_s!r} s: {error}") from None
+                unreadable.setdefault(topic, LogError(f"{path}, message at t_s={log_time_s!r} s: {error}"))
+    for topic, error in unreadable.items():
+        if topic not in read_on:
+            raise error
+    origin = first_log_time if start_ns is None else start_ns
     return LogContents(messages=messages, metadata=metadata, truncated=not scanner.complete,
-                       start_time_unix_s=None if start_ns is None else start_ns / _NS_PER_S)
+                       start_time_unix_s=None if start_ns is None else start_ns / _NS_PER_S,
+                       damage=damage_of(scanner, undecodable, origin))
+
+
+def damage_of(scanner: RecordScanner, undecodable: int, origin_ns: int | None) -> LogDamage | None:
+    """What a finished scan of ``scanner`` skipped, with ``undecodable`` messages, times
+    relative to ``origin_ns`` (the log's t_s = 0, ns)."""
+    skipped = scanner.skipped
+    if not skipped and not undecodable:
+        return None
+
+    def session_time(log_time: int | None) -> float | None:
+        return None if log_time is None or origin_ns is None else (log_time - origin_ns) / _NS_PER_S
+
+    if scanner.messages_in_file is not None:
+        lost: int | None = scanner.messages_in_file - scanner.messages_read
+    else:
+        counts = [stretch.messages for stretch in skipped]
+        lost = None if None in counts else sum(counts)
+    return LogDamage(skipped_stretches=len(skipped), skipped_bytes=sum(s.end - s.start for s in skipped),
+                     chunks_lost=sum(s.chunks for s in skipped), messages_lost=lost,
+                     lost_spans_s=tuple((session_time(s.last_before_ns), session_time(s.first_after_ns))
+                                        for s in skipped),
+                     undecodable_messages=undecodable)
 
 
 def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:

@@ -1,103 +1,274 @@
-"""Linear reading of an MCAP file that keeps every whole record before any damage.
+"""Linear reading of an MCAP file that keeps every intact record, around damage too.
 
 `mcap.reader.make_reader` starts from the footer, which a killed writer never wrote; the
 library's StreamReader reads forward but ends a damaged file with whatever exception the
-cut happens to cause. `RecordScanner` reads forward too, checks each record's length
-against the bytes left before parsing it, opens chunks with their CRC checked, and ends
-quietly at the first record that is cut off or does not parse. Afterwards `complete`
-says whether the file ended properly (footer and closing magic).
+damage happens to cause. `RecordScanner` reads forward, checks each record's length
+against the bytes left and the next record's head, opens chunks with their CRC checked,
+and at a record that does not parse skips ahead to the next intact chunk (an opcode,
+a length that fits, a body that parses with a matching CRC), so one damaged chunk costs
+that chunk only. What it skipped is in `RecordScanner.skipped`; a file that merely
+ends early (a killed writer) skips nothing, it is `truncated`.
 """
 
 from __future__ import annotations
 
-import os
+import dataclasses
 import struct
 from collections.abc import Iterator
+from dataclasses import dataclass
 from io import BytesIO
 from pathlib import Path
 
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import (Attachment, Channel, Chunk, DataEnd, Footer, Header, McapRecord, Message, Metadata,
-                          Schema)
+from mcap.records import (Attachment, Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, McapRecord, Message,
+                          MessageIndex, Metadata, Schema, Statistics)
 from mcap.stream_reader import breakup_chunk
 
 from ..errors import UserError
+from ..files import check_regular_input
 
 MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEAD = struct.Struct("<BQ")
+_FOOTER_LENGTH = 8 + 8 + 4
+_OPCODES = frozenset(int(opcode) for opcode in Opcode)
+# A record longer than this is a damaged length field, not a session log.
+_MAX_RECORD_LENGTH = 1 << 40
 
-# Records the bench reads (messages too, parsed apart: they need their length); the rest
-# (indexes, statistics, summary offsets) are skipped: they only repeat the data section.
+# Records the scanner parses (messages too, parsed apart: they need their length), each
+# also to check that its fields fill its length exactly; of them it yields `_WANTED`. The
+# indexes and statistics only repeat the data section (the summary's are read for what
+# damage cost).
 _PARSERS = {
     Opcode.HEADER: Header.read, Opcode.FOOTER: Footer.read, Opcode.SCHEMA: Schema.read,
     Opcode.CHANNEL: Channel.read, Opcode.METADATA: Metadata.read, Opcode.CHUNK: Chunk.read,
     Opcode.ATTACHMENT: Attachment.read, Opcode.DATA_END: DataEnd.read,
+    Opcode.MESSAGE_INDEX: MessageIndex.read, Opcode.STATISTICS: Statistics.read, Opcode.CHUNK_INDEX: ChunkIndex.read,
 }
-_WANTED = frozenset(_PARSERS) | {Opcode.MESSAGE}
+_WANTED = frozenset({Opcode.HEADER, Opcode.FOOTER, Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA, Opcode.CHUNK,
+                     Opcode.ATTACHMENT, Opcode.DATA_END, Opcode.MESSAGE})
+# Where reading resumes after damage: a chunk, or the end of the data section.
+_RESYNC = (Opcode.CHUNK, Opcode.DATA_END)
+
+
+@dataclass(frozen=True)
+class SkippedStretch:
+    """A damaged stretch of the file, skipped up to the next intact chunk.
+
+    start, end: its byte offsets in the file.
+    chunks: chunks it held (from the file's chunk index; else 1 if it began with one).
+    messages: messages those chunks held, from the file's message indexes (None if the
+        damage took them too).
+    last_before_ns, first_after_ns: log time of the last message read before it and
+        of the first read after it, ns (None if there is none).
+    """
+
+    start: int
+    end: int
+    chunks: int
+    messages: int | None
+    last_before_ns: int | None = None
+    first_after_ns: int | None = None
 
 
 class RecordScanner:
-    """Iterate over the whole records of an MCAP file in file order (a chunk is replaced
-    by the schemas, channels and messages inside it).
+    """Iterate over the intact records of an MCAP file in file order (a chunk is replaced
+    by the schemas, channels and messages inside it). A complete file's summary schemas
+    and channels come first after the header too, so that messages whose chunk lost its
+    channel record can still be read.
 
-    path: the file. A file that does not start with the MCAP magic raises `UserError`
-        naming it; an empty file, or one holding only the start of the magic, is a log
-        cut off before its first record and yields nothing.
-    open_chunks: False skips chunks unread (for metadata only).
+    path: the file. A file that does not start with the MCAP magic, or is not a regular
+        file, raises `UserError` naming it; an empty file, or one holding only the start
+        of the magic, is a log cut off before its first record and yields nothing.
+    open_chunks: False skips intact chunks unread (for metadata only).
+
+    After iterating: `complete` (footer and closing magic found), `skipped` (the damaged
+    stretches), `messages_read`, and `messages_in_file` (the file's own message count,
+    from a readable summary; None without one).
     """
 
     def __init__(self, path: str | Path, *, open_chunks: bool = True) -> None:
         self.path = Path(path)
         self.open_chunks = open_chunks
         self.complete = False
+        self.skipped: list[SkippedStretch] = []
+        self.messages_in_file: int | None = None
+        self.messages_read = 0
 
     def __iter__(self) -> Iterator[McapRecord]:
         self.complete = False
+        self.skipped = []
+        self.messages_in_file = None
+        self.messages_read = 0
+        check_regular_input(self.path)
         try:
-            handle = self.path.open("rb")
+            data = self.path.read_bytes()
         except OSError as error:
             raise UserError(f"{self.path}: cannot read: {error.strerror or error}") from None
-        with handle:
-            size = os.fstat(handle.fileno()).st_size
-            start = handle.read(len(MAGIC))
-            if start != MAGIC:
-                if MAGIC.startswith(start):
-                    return
-                raise UserError(f"{self.path}: not an MCAP file (it does not start with the MCAP magic bytes); "
-                                "expected a session log written by the bench")
-            position = len(MAGIC)
-            while True:
-                head = handle.read(_RECORD_HEAD.size)
-                if len(head) < _RECORD_HEAD.size:
-                    return
-                opcode, length = _RECORD_HEAD.unpack(head)
-                position += _RECORD_HEAD.size
-                if length > size - position:
-                    return  # cut off, or a damaged length field
-                position += length
-                if opcode not in _WANTED or (opcode == Opcode.CHUNK and not self.open_chunks):
-                    handle.seek(length, os.SEEK_CUR)
-                    continue
-                records = _parse(opcode, handle.read(length))
-                if records is None:
-                    return
-                yield from records
-                if opcode == Opcode.FOOTER:
-                    self.complete = handle.read(len(MAGIC) + 1) == MAGIC
-                    return
+        if not data.startswith(MAGIC):
+            if MAGIC.startswith(data):
+                return
+            raise UserError(f"{self.path}: not an MCAP file (it does not start with the MCAP magic bytes); "
+                            "expected a session log written by the bench")
+        summary = _Summary.of(data)
+        self.messages_in_file = summary.message_count
+        position = len(MAGIC)
+        last_log_time: int | None = None
+        summary_given = False
+        while True:
+            parsed = _record_at(data, position, open_chunks=self.open_chunks)
+            if parsed is None:
+                resume = _next_intact(data, position + 1)
+                if resume is None:
+                    return  # cut off: nothing intact follows
+                chunks = summary.chunks_between(position, resume, data)
+                known_empty = chunks == 0 and summary.chunk_offsets is not None
+                self.skipped.append(SkippedStretch(
+                    position, resume, chunks=chunks,
+                    messages=0 if known_empty else _messages_indexed(data, position, resume),
+                    last_before_ns=last_log_time))
+                position = resume
+                continue
+            opcode, records, end = parsed
+            for record in records:
+                if isinstance(record, Message):
+                    self.messages_read += 1
+                    if self.skipped and self.skipped[-1].first_after_ns is None:
+                        self.skipped[-1] = dataclasses.replace(self.skipped[-1], first_after_ns=record.log_time)
+                    last_log_time = record.log_time
+                yield record
+            if not summary_given:
+                summary_given = True
+                yield from summary.schemas_and_channels
+            if opcode == Opcode.FOOTER:
+                self.complete = data[end:] == MAGIC
+                return
+            if end >= len(data):
+                return
+            position = end
 
 
-def _parse(opcode: int, body: bytes) -> list[McapRecord] | None:
-    """The records in one record body, or None if it does not parse."""
+def _record_at(data: bytes, position: int, *, open_chunks: bool) -> tuple[int, list[McapRecord], int] | None:
+    """The record at ``position`` (its opcode, the records it yields, where the next
+    begins), or None if it is cut off or damaged."""
+    if len(data) - position < _RECORD_HEAD.size:
+        return None
+    opcode, length = _RECORD_HEAD.unpack_from(data, position)
+    end = position + _RECORD_HEAD.size + length
+    if opcode not in _OPCODES or end > len(data) or not _plausible_head(data, end):
+        return None
+    if opcode not in _PARSERS and opcode != Opcode.MESSAGE:
+        return opcode, [], end
+    # Parsed even when not wanted, to check the length (and a chunk's CRC).
+    records = _parse(opcode, data, position, end)
+    if records is None:
+        return None
+    wanted = opcode in _WANTED and (open_chunks or opcode != Opcode.CHUNK)
+    return opcode, records if wanted else [], end
+
+
+def _plausible_head(data: bytes, position: int) -> bool:
+    """Whether a record can begin at ``position``: the file ends there or is cut within
+    the head, or a known opcode with a sane length is there (the length may run past a
+    cut). This catches a damaged length that sent the reader into the middle of data."""
+    if len(data) - position < _RECORD_HEAD.size:
+        return True
+    opcode, length = _RECORD_HEAD.unpack_from(data, position)
+    return opcode in _OPCODES and length < _MAX_RECORD_LENGTH
+
+
+def _next_intact(data: bytes, start: int) -> int | None:
+    """The offset of the first intact chunk (or data end) at or after ``start``."""
+    candidates = [data.find(bytes([opcode]), start) for opcode in _RESYNC]
+    while True:
+        found = [offset for offset in candidates if offset >= 0]
+        if not found:
+            return None
+        offset = min(found)
+        if _record_at(data, offset, open_chunks=True) is not None:
+            return offset
+        candidates = [data.find(bytes([opcode]), offset + 1) if candidate == offset else candidate
+                      for opcode, candidate in zip(_RESYNC, candidates)]
+
+
+def _messages_indexed(data: bytes, start: int, end: int) -> int | None:
+    """Messages of the damaged chunk at ``start``, from the message indexes that follow
+    it (None if its length or its indexes are damaged too)."""
+    if len(data) - start < _RECORD_HEAD.size:
+        return None
+    opcode, length = _RECORD_HEAD.unpack_from(data, start)
+    position = start + _RECORD_HEAD.size + length
+    if opcode != Opcode.CHUNK or position > end:
+        return None
+    count = 0
+    while position < end:
+        parsed = _record_at(data, position, open_chunks=False)
+        if parsed is None or parsed[0] != Opcode.MESSAGE_INDEX:
+            return None
+        (index,) = _parse(Opcode.MESSAGE_INDEX, data, position, parsed[2]) or [None]
+        if not isinstance(index, MessageIndex):
+            return None
+        count += len(index.records)
+        position = parsed[2]
+    return count
+
+
+def _parse(opcode: int, data: bytes, position: int, end: int) -> list[McapRecord] | None:
+    """The records in one record's body, or None if it does not parse."""
+    body = data[position + _RECORD_HEAD.size:end]
     try:
         stream = ReadDataStream(BytesIO(body))
         record = Message.read(stream, len(body)) if opcode == Opcode.MESSAGE else _PARSERS[opcode](stream)
+        if stream.count != len(body):
+            return None  # a damaged length: the record's own fields say it is longer or shorter
         if isinstance(record, Chunk):
             return breakup_chunk(record, validate_crc=True)
         return [record]
     # The bytes may be damaged in any way, and the parsers and decompressors answer with a
     # zoo of types (struct.error, EndOfFile, UnicodeDecodeError, CRC ValueError, zstd and
-    # lz4 errors, MemoryError for a wild size): whichever it is, the readable part ends here.
+    # lz4 errors, MemoryError for a wild size): whichever it is, this record is lost.
     except Exception:
         return None
+
+
+@dataclass(frozen=True)
+class _Summary:
+    """What a complete file's summary section says (empty for a cut file or a damaged
+    summary)."""
+
+    schemas_and_channels: tuple[McapRecord, ...] = ()
+    chunk_offsets: tuple[int, ...] | None = None
+    message_count: int | None = None
+
+    @classmethod
+    def of(cls, data: bytes) -> _Summary:
+        footer_at = len(data) - len(MAGIC) - _RECORD_HEAD.size - _FOOTER_LENGTH
+        if footer_at < len(MAGIC) or not data.endswith(MAGIC):
+            return cls()
+        footer = _parse(Opcode.FOOTER, data, footer_at, len(data) - len(MAGIC))
+        if not footer or not isinstance(footer[0], Footer) or not len(MAGIC) <= footer[0].summary_start < footer_at:
+            return cls()
+        kept: list[McapRecord] = []
+        offsets: list[int] = []
+        count = None
+        position = footer[0].summary_start
+        while position < footer_at:
+            parsed = _record_at(data, position, open_chunks=False)
+            if parsed is None:
+                return cls()
+            opcode, _, end = parsed
+            records = _parse(opcode, data, position, end) if opcode in _PARSERS else []
+            for record in records or ():
+                if isinstance(record, (Schema, Channel)):
+                    kept.append(record)
+                elif isinstance(record, ChunkIndex):
+                    offsets.append(record.chunk_start_offset)
+                elif isinstance(record, Statistics):
+                    count = record.message_count
+            position = end
+        return cls(tuple(kept), tuple(offsets), count)
+
+    def chunks_between(self, start: int, end: int, data: bytes) -> int:
+        if self.chunk_offsets is not None:
+            return sum(start <= offset < end for offset in self.chunk_offsets)
+        return int(data[start] == Opcode.CHUNK)

@@ -1,14 +1,13 @@
 """`recover_log`: rewrite whatever of a log is readable into a valid, finished MCAP file.
 
 Records are copied as they are (message bytes, times and sequence numbers untouched),
-so the copy of a complete log holds the same messages, and the copy of a truncated one
-the whole messages before the cut, now with a summary and footer that any MCAP reader
-(`mcap.reader.make_reader`, Foxglove, Lichtblick) accepts.
+so the copy of a complete log holds the same messages, and the copy of a truncated or
+damaged one every intact chunk's messages, now with a summary and footer that any MCAP
+reader (`mcap.reader.make_reader`, Foxglove, Lichtblick) accepts.
 """
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,7 +15,8 @@ from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
 from ..errors import UserError
-from .reader import start_time_ns
+from ..files import publish
+from .reader import LogDamage, damage_of, start_time_ns
 from .records import RecordScanner
 from .format import LOG_METADATA_NAME
 from .writer import LIBRARY
@@ -29,13 +29,15 @@ class RecoveryReport:
     messages: messages written to the recovered file.
     last_t_s, first_t_s: session time of the last and first of them, s (None if none);
         from the log's start time, or relative to the first message if it has none.
-    truncated: the input did not end properly (killed writer, cut or damaged file).
+    truncated: the input did not end properly (killed writer, cut file).
+    damage: what damage inside the input cost (None if none).
     """
 
     messages: int
     last_t_s: float | None
     truncated: bool
     first_t_s: float | None = None
+    damage: LogDamage | None = None
 
 
 def recovered_path(log: str | Path) -> Path:
@@ -43,25 +45,20 @@ def recovered_path(log: str | Path) -> Path:
     return Path(log).with_suffix(".recovered.mcap")
 
 
-def recover_log(src: str | Path, dst: str | Path) -> RecoveryReport:
-    """Copy every whole record of ``src`` (a log, possibly truncated) into a finished MCAP
-    file ``dst``. ``dst`` appears only once complete (written beside it, then renamed).
-    Raises `UserError` if ``src`` is not MCAP, cannot be read, or is ``dst``."""
+def recover_log(src: str | Path, dst: str | Path, *, overwrite: bool = False) -> RecoveryReport:
+    """Copy every intact record of ``src`` (a log, possibly truncated or damaged) into a
+    finished MCAP file ``dst``. ``dst`` appears only once complete, and never replaces an
+    existing file unless ``overwrite``. Raises `UserError` if ``src`` is not MCAP, cannot
+    be read, or is ``dst``, or ``dst`` exists."""
     src, dst = Path(src), Path(dst)
-    if dst.exists() and src.exists() and os.path.samefile(src, dst):
+    if dst.resolve() == src.resolve():
         raise UserError(f"{dst}: the recovered log must not overwrite its source; choose another output")
-    partial = dst.with_name(dst.name + ".partial")
-    try:
+
+    def write(partial: Path) -> RecoveryReport:
         with partial.open("wb") as handle:
-            report = _copy(RecordScanner(src), Writer(handle, compression=CompressionType.ZSTD))
-        os.replace(partial, dst)
-    except OSError as error:
-        partial.unlink(missing_ok=True)
-        raise UserError(f"{dst}: cannot write: {error.strerror or error}") from None
-    except BaseException:
-        partial.unlink(missing_ok=True)
-        raise
-    return report
+            return _copy(RecordScanner(src), Writer(handle, compression=CompressionType.ZSTD))
+
+    return publish(dst, "recovered log", write, overwrite=overwrite)
 
 
 def _copy(scanner: RecordScanner, writer: Writer) -> RecoveryReport:
@@ -103,4 +100,4 @@ def _copy(scanner: RecordScanner, writer: Writer) -> RecoveryReport:
         return None if log_time is None or origin is None else (log_time - origin) / 10**9
 
     return RecoveryReport(messages=count, last_t_s=session_time(last), truncated=not scanner.complete,
-                          first_t_s=session_time(first))
+                          first_t_s=session_time(first), damage=damage_of(scanner, 0, origin))

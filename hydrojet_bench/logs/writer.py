@@ -25,7 +25,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 from numpy.typing import ArrayLike
 
 from .. import __version__
-from ..errors import UserError
+from ..files import create_new
 from ..params import RodParameters
 from .codec import LogError, decode, encode
 from .format import FORMAT_VERSION, LOG_METADATA_NAME, MESSAGE_ENCODING, SCHEMA_ENCODING, START_TIME_KEY
@@ -46,20 +46,24 @@ _IDENTITY_POSE = Pose(position=Vector3(0.0, 0.0, 0.0), orientation=Quaternion(x=
 class LogWriter:
     """Writes a session log (see the module docstring); a context manager.
 
-    path: the .mcap file, created or overwritten.
+    path: the .mcap file, created exclusively: an existing file raises `UserError` (two
+        writers can never share a log) unless ``overwrite``.
     metadata: named records of string keys and values, e.g. ``{"bench": {"profile_name":
         "sim", "profile_toml": "..."}}``; written right after the header, so they survive
         any crash. The name ``"hydrojet_bench.log"`` is reserved.
     start_time_unix_s: wall-clock time of session time 0, s since the Unix epoch
         (default: now). Message times in the file are this plus ``t_s``, in ns.
     flush_interval_s: wall time between automatic flushes, s.
+    overwrite: replace an existing file (the user's ``--overwrite``, or a file this
+        process reserved with `hydrojet_bench.files.create_numbered`).
 
     `write` raises ValueError for a record that is not of a topic's type or that its
     topic's reader would refuse (e.g. NaN where null is not allowed), naming the field.
     """
 
     def __init__(self, path: str | Path, metadata: Mapping[str, Mapping[str, str]] | None = None,
-                 start_time_unix_s: float | None = None, flush_interval_s: float = 1.0) -> None:
+                 start_time_unix_s: float | None = None, flush_interval_s: float = 1.0, *,
+                 overwrite: bool = False) -> None:
         if not flush_interval_s > 0:
             raise ValueError(f"flush_interval_s must be > 0 s, got {flush_interval_s!r}")
         records = _checked_metadata(metadata or {})
@@ -70,10 +74,7 @@ class LogWriter:
         whole_s = int(start_s)  # split: start_s * 1e9 alone would round to 256 ns
         self.start_time_ns = whole_s * _NS_PER_S + round((start_s - whole_s) * _NS_PER_S)
         self.flush_interval_s = float(flush_interval_s)
-        try:
-            self._stream = self.path.open("wb")
-        except OSError as error:
-            raise UserError(f"{self.path}: cannot write the session log: {error.strerror or error}") from None
+        self._stream = create_new(self.path, "session log", overwrite=overwrite)
         # Chunks are closed by time (flush_interval_s); the size limit only caps memory.
         self._writer = Writer(self._stream, chunk_size=4 * 1024 * 1024, compression=CompressionType.ZSTD)
         self._writer.start(library=LIBRARY)

@@ -79,7 +79,9 @@ def test_valves_are_closed_when_the_session_ends(finished_session):
     session, _ = finished_session
     assert session._devices.valve_emulator.duties_permille == (0, 0, 0)
     log = read_log(session.request.log_path, topics=["/valves/command"])
-    assert log.messages[-1].jet_forces_n == (0.0, 0.0, 0.0)
+    assert log.messages[-2].command == "SET_ALL" and log.messages[-2].jet_forces_n == (0.0, 0.0, 0.0)
+    # The ALL_OFF the valve driver sends as the rig closes is on the record too.
+    assert log.messages[-1].command == "ALL_OFF" and log.messages[-1].duties_permille == (0.0, 0.0, 0.0)
     assert not log.truncated
 
 

@@ -46,8 +46,8 @@ def test_baseline_shows_the_error_fall_when_the_effect_is_added(calibrated, caps
                  "--online", "--json", str(out), "--report", str(report)]) == 0
     figures = json.loads(out.read_text())
     baseline = figures["baseline"]
-    assert set(figures) == TABLE_2_KEYS | BREAKDOWN_KEYS | {"missing_wrench", "baseline"}
-    assert set(baseline) == set(figures) - {"baseline"}
+    assert set(figures) == TABLE_2_KEYS | BREAKDOWN_KEYS | {"missing_wrench", "baseline", "log_damage"}
+    assert set(baseline) == set(figures) - {"baseline", "log_damage"}
     assert figures["parameters"]["effects"] == ["gravity", "clogged_jet"]
     assert baseline["parameters"]["effects"] == ["gravity"]
     # The clogged jet leaves the constant-disturbance model ~10 deg off; modelled, only
@@ -78,7 +78,7 @@ def test_without_baseline_the_figures_keep_their_keys(calibrated, capsys):
     out = folder / "plain.json"
     assert main(["compare", str(data), "--params", str(before), "--json", str(out)]) == 0
     figures = json.loads(out.read_text())
-    assert set(figures) == TABLE_2_KEYS | BREAKDOWN_KEYS  # no online: no missing wrench
+    assert set(figures) == TABLE_2_KEYS | BREAKDOWN_KEYS | {"log_damage"}  # no online: no missing wrench
     for key in TABLE_2_KEYS | BREAKDOWN_KEYS - {"parameters"}:
         assert set(figures[key]) == {"ref"}, key
     assert "before -> after" not in capsys.readouterr().out

@@ -111,7 +111,7 @@ def session(tmp_path_factory):
     with live calibration and online estimation, and its parameters as a file."""
     folder = tmp_path_factory.mktemp("live")
     settings = PROFILE.config
-    settings = msgspec.structs.replace(settings, session=msgspec.structs.replace(settings.session, time_scale=20.0,
+    settings = msgspec.structs.replace(settings, session=msgspec.structs.replace(settings.session, time_scale=10.0,
                                                                                  window_s=0.5))
     model, _ = build_model("cosserat", [])
     plan = calibration_plan(12, settle_s=SETTLE_S, seed=2) + validation_sweeps(steps_up=2, repetitions=1,

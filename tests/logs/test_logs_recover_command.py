@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from log_examples import cut_inside_chunk, events_log
+from mcap.reader import make_reader
 
 from hydrojet_bench.cli import main
 from hydrojet_bench.logs import read_log
@@ -34,3 +35,21 @@ def test_recover_refuses_what_is_not_a_log(tmp_path: Path, capsys) -> None:
     error = " ".join(capsys.readouterr().err.split())  # the CLI's console wraps long lines
     assert "notes.mcap: not an MCAP file" in error
     assert not (tmp_path / "notes.recovered.mcap").exists()
+
+
+def test_recover_keeps_the_chunks_after_a_damaged_one_and_says_what_was_lost(tmp_path: Path, capsys) -> None:
+    full = events_log(tmp_path / "full.mcap", chunks=3)
+    with full.open("rb") as handle:
+        middle = make_reader(handle).get_summary().chunk_indexes[1]
+    data = bytearray(full.read_bytes())
+    data[middle.chunk_start_offset + middle.chunk_length - 5] ^= 0x01
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data))
+    assert main(["recover", str(damaged)]) == 0
+    captured = capsys.readouterr()
+    assert f"{damaged} was complete" in captured.out
+    assert f"wrote {tmp_path / 'damaged.recovered.mcap'}: 8 messages, t = 0.000 s to 2.300 s" in captured.out
+    assert captured.err.startswith(f"warning: {damaged} is damaged: 1 damaged chunk(s) skipped (")
+    assert "4 messages, session time 0.300 s to 2.000 s); kept every intact chunk" in captured.err
+    kept = [m.message for m in read_log(tmp_path / "damaged.recovered.mcap").messages]
+    assert kept == ["0.0", "0.1", "0.2", "0.3", "2.0", "2.1", "2.2", "2.3"]

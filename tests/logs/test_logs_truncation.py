@@ -12,8 +12,9 @@ from pathlib import Path
 
 import msgspec
 import pytest
-from log_examples import METADATA, cut_inside_chunk, events_log, small_log
+from log_examples import EXAMPLES, METADATA, cut_inside_chunk, events_log, small_log
 from mcap.reader import make_reader
+from mcap.writer import Writer
 
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.logs import read_log, read_metadata, recover_log
@@ -95,9 +96,10 @@ def test_every_truncation_yields_a_prefix(tmp_path: Path) -> None:
     assert not full.truncated
 
 
-def test_damage_in_the_middle_keeps_what_comes_before(tmp_path: Path) -> None:
+def test_damage_in_the_middle_costs_that_chunk_only(tmp_path: Path) -> None:
     full_path = small_log(tmp_path / "full.mcap", chunks=3)
     full = read_log(full_path)
+    third = len(full.messages) // 3
     with full_path.open("rb") as handle:
         second_chunk = make_reader(handle).get_summary().chunk_indexes[1]
     data = bytearray(full_path.read_bytes())
@@ -106,8 +108,72 @@ def test_damage_in_the_middle_keeps_what_comes_before(tmp_path: Path) -> None:
     damaged = tmp_path / "damaged.mcap"
     damaged.write_bytes(bytes(data))
     contents = read_log(damaged)
+    assert not contents.truncated  # the file still ends properly
+    assert contents.messages == full.messages[:third] + full.messages[2 * third:]
+    damage = contents.damage
+    assert damage is not None and (damage.chunks_lost, damage.messages_lost, damage.undecodable_messages) == (1, third, 0)
+    assert damage.lost_spans_s == (pytest.approx((full.messages[third - 1].t_s, full.messages[2 * third].t_s)),)
+    assert "1 damaged chunk(s) skipped" in damage.describe() and f"{third} messages" in damage.describe()
+    assert read_log(full_path).damage is None
+
+    report = recover_log(damaged, tmp_path / "recovered.mcap")
+    assert report.messages == 2 * third and report.damage == damage
+    recovered = read_log(tmp_path / "recovered.mcap")
+    assert recovered.messages == contents.messages and recovered.damage is None
+
+
+def test_a_damaged_length_field_still_finds_the_next_chunk(tmp_path: Path) -> None:
+    full_path = small_log(tmp_path / "full.mcap", chunks=3)
+    full = read_log(full_path)
+    third = len(full.messages) // 3
+    with full_path.open("rb") as handle:
+        second_chunk = make_reader(handle).get_summary().chunk_indexes[1]
+    for byte in range(1, 9):  # each byte of the chunk's record length
+        data = bytearray(full_path.read_bytes())
+        data[second_chunk.chunk_start_offset + byte] ^= 0x10
+        damaged = tmp_path / "damaged.mcap"
+        damaged.write_bytes(bytes(data))
+        contents = read_log(damaged)
+        assert contents.messages == full.messages[:third] + full.messages[2 * third:], byte
+        # The summary at the end of a complete file still counts what was lost.
+        assert contents.damage is not None and contents.damage.messages_lost == third, byte
+
+
+def test_damage_in_a_cut_log_is_counted_from_the_message_index(tmp_path: Path) -> None:
+    full_path = small_log(tmp_path / "full.mcap", chunks=4)
+    full = read_log(full_path)
+    quarter = len(full.messages) // 4
+    cut = cut_inside_chunk(full_path, 3, tmp_path / "cut.mcap")
+    with full_path.open("rb") as handle:
+        first_chunk = make_reader(handle).get_summary().chunk_indexes[0]
+    data = bytearray(cut.read_bytes())
+    data[first_chunk.chunk_start_offset + first_chunk.chunk_length - 20] ^= 0xFF
+    cut.write_bytes(bytes(data))
+    contents = read_log(cut)
     assert contents.truncated
-    assert contents.messages == full.messages[:len(full.messages) // 3]
+    assert contents.damage is not None and contents.damage.messages_lost == quarter
+    # Chunk 0 held the first schemas and channels; the later chunks repeat none, so their
+    # messages are lost with it (a complete log has them in its summary).
+    assert len(contents.messages) <= 2 * quarter
+
+
+def test_one_unreadable_message_among_good_ones_is_skipped_and_counted(tmp_path: Path) -> None:
+    path = tmp_path / "odd.mcap"
+    good = json.loads(msgspec.json.encode(EXAMPLES["/events"]))
+    with path.open("wb") as handle:
+        writer = Writer(handle)
+        writer.start()
+        schema = writer.register_schema("hydrojet_bench.Event", "jsonschema", b"{}")
+        events = writer.register_channel("/events", "json", schema)
+        for index in range(5):
+            message = {**good, "t_s": float(index)} if index != 2 else {"t_s": 2.0, "level": 3}
+            writer.add_message(events, log_time=index * 10**9, publish_time=index * 10**9,
+                               data=json.dumps(message).encode())
+        writer.finish()
+    contents = read_log(path)
+    assert [m.t_s for m in contents.messages] == [0.0, 1.0, 3.0, 4.0]
+    assert contents.damage is not None and contents.damage.undecodable_messages == 1
+    assert contents.damage.describe() == "1 unreadable message(s) skipped"
 
 
 def test_recovery_of_a_truncated_log(tmp_path: Path) -> None:

@@ -140,12 +140,26 @@ def test_flush_hands_everything_written_to_the_file(tmp_path: Path) -> None:
         flushed = read_log(shutil.copy(path, tmp_path / "after.mcap"))
     assert unflushed.messages == [] and unflushed.truncated
     assert len(flushed.messages) == len(TOPICS) and flushed.truncated
-    with LogWriter(path, flush_interval_s=1e-9) as log:  # every write is past the interval
+    with LogWriter(path, flush_interval_s=1e-9, overwrite=True) as log:  # every write is past the interval
         write_all_topics(log, 0.0)
         assert len(read_log(shutil.copy(path, tmp_path / "auto.mcap")).messages) == len(TOPICS)
     with pytest.raises(ValueError, match="closed"):
         log.write(EXAMPLES["/events"])
     log.close()  # closing twice is harmless
+
+
+def test_an_existing_log_is_never_overwritten_unless_asked(tmp_path: Path) -> None:
+    path = small_log(tmp_path / "run.mcap", chunks=2)
+    before = path.read_bytes()
+    with pytest.raises(UserError, match=r"run.mcap: a session log already exists there; choose another file or "
+                                        r"pass --overwrite"):
+        LogWriter(path)
+    assert path.read_bytes() == before
+    with pytest.raises(UserError, match="is a directory"):
+        LogWriter(tmp_path)
+    with LogWriter(path, overwrite=True):
+        pass
+    assert read_log(path).messages == []
 
 
 def test_log_is_finished_when_the_session_fails(tmp_path: Path) -> None:

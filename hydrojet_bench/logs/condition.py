@@ -1,0 +1,64 @@
+"""`log_condition`: whether a session log is whole, and if not, what the analysis of it
+is missing: the damage the readers skipped, and the plan steps it does not hold."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..plans import CALIBRATION_SWEEP
+from .reader import LogDamage, read_log
+from .topics import Sample, Step
+
+
+@dataclass(frozen=True)
+class LogCondition:
+    """path: the log. truncated: it does not end properly (the session was killed, or
+    the file cut). damage: what damage inside it cost (None if none). steps_planned: the
+    plan's step count, from the log's metadata (None if it does not say); steps_logged:
+    settled steps (``/bench/step``) it holds, calibration_poses_logged: those of them on
+    calibration poses (sweep -1)."""
+
+    path: Path
+    truncated: bool
+    damage: LogDamage | None
+    steps_planned: int | None
+    steps_logged: int
+    calibration_poses_logged: int
+
+    @property
+    def whole(self) -> bool:
+        return not self.truncated and self.damage is None
+
+    @property
+    def steps_missing(self) -> int | None:
+        return None if self.steps_planned is None else max(self.steps_planned - self.steps_logged, 0)
+
+    def notice(self) -> str:
+        """One line: what is wrong with the log and what the analysis is missing."""
+        problems = (["it is truncated (the session did not finish, or the file was cut)"] if self.truncated else [])
+        if self.damage is not None:
+            problems.append(f"it is damaged: {self.damage.describe()}")
+        missing = self.steps_missing
+        steps = (f"{self.steps_logged} settled steps ({self.calibration_poses_logged} calibration poses)"
+                 if missing is None else
+                 f"{missing} of {self.steps_planned} planned steps missing; analysing the {self.steps_logged} "
+                 f"logged ({self.calibration_poses_logged} calibration poses)")
+        return f"{self.path}: {'; '.join(problems)}; {steps}"
+
+    def as_dict(self) -> dict[str, object]:
+        return {"truncated": self.truncated, "damage": None if self.damage is None else self.damage.as_dict(),
+                "steps_planned": self.steps_planned, "steps_logged": self.steps_logged,
+                "steps_missing": self.steps_missing, "calibration_poses_logged": self.calibration_poses_logged}
+
+
+def log_condition(path: str | Path) -> LogCondition:
+    """The condition of a session log (see `LogCondition`); reads its samples and steps."""
+    contents = read_log(path, topics=[Step.topic, Sample.topic])
+    steps = contents.on(Step)
+    try:
+        planned: int | None = int(contents.metadata.get("bench", {})["plan_steps"])
+    except (KeyError, ValueError):
+        planned = steps[0].count if steps else None
+    return LogCondition(Path(path), contents.truncated, contents.damage, planned, len(steps),
+                        sum(step.sweep == CALIBRATION_SWEEP for step in steps))
