@@ -20,7 +20,7 @@ DIAGNOSE_COLUMNS: dict[str, str] = {
 }
 REPLAY_COLUMNS: dict[str, str] = {
     "log_id": "string", "log": "string", "model": "string", "steps": "int64",
-    "validation_orientation_rmse_deg": "float64", "live_difference_deg": "float64", "truncated": "bool",
+    "validation_orientation_rmse_deg": "float64", "live_difference_deg": "float64", "truncated": "bool", "damaged": "bool",
     "seconds": "float64", "error": "string",
 }
 
@@ -71,6 +71,7 @@ def replay_log(task: LogTask) -> dict:
     """One row: the session log replayed with its live model and parameter timeline."""
     from ..analysis.compare import compare_steps
     from ..bench.replay import live_difference_deg, read_session, replay
+    from ..logs.condition import log_condition
     from ..model_choice import ModelDefaults, choose_model
 
     started = time.perf_counter()
@@ -85,7 +86,9 @@ def replay_log(task: LogTask) -> dict:
         if not validation:
             raise UserError("the model converged on none of the logged steps")
         results = compare_steps([estimates[i] for i in validation], session.steps.select(validation))
-        row.update(model=session.model_name, steps=len(session.steps), truncated=session.truncated,
+        condition = log_condition(task.path)
+        row.update(model=session.model_name, steps=len(session.steps), truncated=condition.truncated,
+                   damaged=condition.damage is not None,
                    validation_orientation_rmse_deg=float(results["ref"].overall.orientation_rmse_deg),
                    live_difference_deg=live_difference_deg(session, estimates))
     except Exception as error:  # noqa: BLE001
