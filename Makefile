@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/hydrojet-bench run --log sessions/demo.mcap --report sessions/demo-report
+	$(BIN)/hydrojet-bench run --log sessions/demo.mcap --overwrite --report sessions/demo-report
 
 test: $(STAMP)
 	$(BIN)/python -m pytest
