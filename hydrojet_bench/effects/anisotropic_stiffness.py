@@ -13,7 +13,10 @@ if TYPE_CHECKING:
 
 # At a ratio of 2 (or 1/2) one axis is 41 % stiffer and the other 29 % softer than their
 # mean: a section that uneven is a visibly bad part. Symmetric in the logarithm.
+# Physical limits 1/5 and 5: one axis 2.2 times stiffer and the other 2.2 times softer
+# than the mean, a flat strip rather than a rod with three lumens.
 _RATIO_BOUNDS = (0.5, 2.0)
+_RATIO_LIMITS = (0.2, 5.0)
 
 
 class AnisotropicStiffness:
@@ -48,7 +51,9 @@ class AnisotropicStiffness:
     )
     parameters: ClassVar[tuple[EffectParameter, ...]] = (
         EffectParameter("stiffness_ratio", 1.0, *_RATIO_BOUNDS, "1",
-                        "bending stiffness about body x over that about body y, geometric mean kept"),
+                        "bending stiffness about body x over that about body y, geometric mean kept",
+                        *_RATIO_LIMITS,
+                        limit_reason="a ratio of 5 (or 1/5) is a flat strip, not a round rod with a defect"),
     )
     uses_actuation: ClassVar[bool] = False
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, ClassVar, Protocol, runtime_checkable
 
 if TYPE_CHECKING:
@@ -22,7 +22,14 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class EffectParameter:
-    """One calibratable parameter of an effect: default value, bounds and unit (SI)."""
+    """One calibratable parameter of an effect: default value, bounds and unit (SI).
+
+    lower/upper: the range a fit searches first, the values a rig plausibly shows.
+    physical_lower/physical_upper: the physical limits, past which the parameter no
+    longer describes the effect (or the model no longer solves); None: the search
+    bound is the limit. limit_reason: why the limits sit where they do. A fit that
+    ends on a search bound is refitted up to the physical limit (`at_physical_limits`).
+    """
 
     name: str
     default: float
@@ -30,14 +37,32 @@ class EffectParameter:
     upper: float
     unit: str
     description: str
+    physical_lower: float | None = None
+    physical_upper: float | None = None
+    limit_reason: str = ""
 
     def __post_init__(self) -> None:
-        for label in ("default", "lower", "upper"):
-            if not math.isfinite(getattr(self, label)):
+        for label in ("default", "lower", "upper", "physical_lower", "physical_upper"):
+            value = getattr(self, label)
+            if value is not None and not math.isfinite(value):
                 raise ValueError(f"effect parameter {self.name!r}: {label} must be finite")
         if not self.lower <= self.default <= self.upper:
             raise ValueError(f"effect parameter {self.name!r}: default {self.default} is outside "
                              f"[{self.lower}, {self.upper}]")
+        if not self.limits[0] <= self.lower <= self.upper <= self.limits[1]:
+            raise ValueError(f"effect parameter {self.name!r}: the physical limits {self.limits} do not "
+                             f"contain the bounds [{self.lower}, {self.upper}]")
+
+    @property
+    def limits(self) -> tuple[float, float]:
+        """The physical limits (the search bounds where none is given)."""
+        return (self.lower if self.physical_lower is None else self.physical_lower,
+                self.upper if self.physical_upper is None else self.physical_upper)
+
+    def widened(self) -> EffectParameter:
+        """This parameter with its search bounds at the physical limits."""
+        lower, upper = self.limits
+        return replace(self, lower=lower, upper=upper)
 
 
 @runtime_checkable
@@ -76,3 +101,33 @@ def scale_modulus(problem: RodProblem, factor: float | np.ndarray) -> None:
     problem.bending_stiffness_x_nm2 = problem.bending_stiffness_x_nm2 * factor
     problem.bending_stiffness_y_nm2 = problem.bending_stiffness_y_nm2 * factor
     problem.torsional_stiffness_nm2 = problem.torsional_stiffness_nm2 * factor
+
+
+@dataclass(frozen=True)
+class WidenedEffect:
+    """An effect whose parameters are searched up to their physical limits: the same
+    name, physics and values, only the fit's bounds change (see `at_physical_limits`)."""
+
+    inner: Effect
+    parameters: tuple[EffectParameter, ...]
+
+    @property
+    def name(self) -> str:  # type: ignore[override]
+        return self.inner.name
+
+    @property
+    def explanation(self) -> str:  # type: ignore[override]
+        return self.inner.explanation
+
+    @property
+    def uses_actuation(self) -> bool:  # type: ignore[override]
+        return self.inner.uses_actuation
+
+    def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
+        self.inner.apply(problem, values)
+
+
+def at_physical_limits(effect: Effect) -> Effect:
+    """``effect`` with every parameter's search bounds widened to its physical limits."""
+    inner = effect.inner if isinstance(effect, WidenedEffect) else effect
+    return WidenedEffect(inner, tuple(parameter.widened() for parameter in inner.parameters))

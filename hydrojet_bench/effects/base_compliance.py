@@ -16,7 +16,11 @@ if TYPE_CHECKING:
 # ~10 rad/(N m) per millimetre of free rod. 100 rad/(N m) is a clamp as soft as ~10 mm
 # of extra rod at the base (a seventh of its length): 0.4 rad at the ~4 mN m clamp
 # moment of a 0.15 N jet. A grip any looser no longer holds the rod.
+# Physical limit 400 rad/(N m): the clamp turns 1.6 rad under a 0.15 N jet, the rod
+# hanging from it like a pendulum; no grip that holds the rod is softer.
 COMPLIANCE_BOUNDS_RAD_PER_NM = (0.0, 100.0)
+COMPLIANCE_LIMIT_RAD_PER_NM = 400.0
+COMPLIANCE_LIMIT_REASON = "400 rad/(N m) turns the clamp 1.6 rad under one 0.15 N jet: no grip that holds the rod"
 
 
 def add_clamp_bending_compliance(problem: RodProblem, compliance_rad_per_nm: float) -> None:
@@ -47,7 +51,8 @@ class BaseCompliance:
     )
     parameters: ClassVar[tuple[EffectParameter, ...]] = (
         EffectParameter("compliance_rad_per_nm", 0.0, *COMPLIANCE_BOUNDS_RAD_PER_NM, "rad/(N m)",
-                        "clamp rotation per unit bending moment at the clamp"),
+                        "clamp rotation per unit bending moment at the clamp",
+                        physical_upper=COMPLIANCE_LIMIT_RAD_PER_NM, limit_reason=COMPLIANCE_LIMIT_REASON),
     )
     uses_actuation: ClassVar[bool] = False
 

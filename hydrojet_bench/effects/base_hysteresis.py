@@ -6,14 +6,17 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, ClassVar
 
 from .base import EffectParameter
-from .base_compliance import COMPLIANCE_BOUNDS_RAD_PER_NM, add_clamp_bending_compliance
+from .base_compliance import (COMPLIANCE_BOUNDS_RAD_PER_NM, COMPLIANCE_LIMIT_RAD_PER_NM, COMPLIANCE_LIMIT_REASON,
+                              add_clamp_bending_compliance)
 
 if TYPE_CHECKING:
     from .problem import RodProblem
 
 # 0.05 rad (3 degrees) of play is a visibly loose clamp; the EM tracker resolves 0.7
-# degrees, so plays from ~0.01 rad up are measurable.
+# degrees, so plays from ~0.01 rad up are measurable. Physical limit 0.3 rad (17
+# degrees): the rod would flop in a clamp that loose instead of being held.
 _PLAY_BOUNDS_RAD = (0.0, 0.05)
+_PLAY_LIMIT_RAD = 0.3
 
 
 class BaseHysteresis:
@@ -36,9 +39,13 @@ class BaseHysteresis:
     )
     parameters: ClassVar[tuple[EffectParameter, ...]] = (
         EffectParameter("compliance_rad_per_nm", 0.0, *COMPLIANCE_BOUNDS_RAD_PER_NM, "rad/(N m)",
-                        "clamp rotation per unit bending moment at the clamp, outside the play"),
+                        "clamp rotation per unit bending moment at the clamp, outside the play",
+                        physical_upper=COMPLIANCE_LIMIT_RAD_PER_NM, limit_reason=COMPLIANCE_LIMIT_REASON),
         EffectParameter("play_rad", 0.0, *_PLAY_BOUNDS_RAD, "rad",
-                        "radius of the play zone the demanded clamp rotation must leave"),
+                        "radius of the play zone the demanded clamp rotation must leave",
+                        physical_upper=_PLAY_LIMIT_RAD,
+                        limit_reason="0.3 rad (17 degrees) of play: the rod flops in the clamp instead of "
+                                     "being held"),
     )
     uses_actuation: ClassVar[bool] = False
 

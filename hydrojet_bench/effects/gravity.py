@@ -25,7 +25,11 @@ class Gravity:
     )
     parameters: ClassVar[tuple[EffectParameter, ...]] = (
         EffectParameter("weight_scale", 1.0, 0.0, 3.0, "1",
-                        "multiplies the nominal rod and capsule weight"),
+                        "multiplies the nominal rod and capsule weight",
+                        physical_upper=6.0,
+                        limit_reason="0: weightless; 6: a rod six times its nominal weight sinks further than "
+                                     "water-filled lumens and a lead-filled capsule can make it (3 already "
+                                     "doubles the capsule's mass and fills every lumen)"),
     )
     uses_actuation: ClassVar[bool] = False
 

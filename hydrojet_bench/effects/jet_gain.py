@@ -14,8 +14,10 @@ if TYPE_CHECKING:
 
 # 0 is a fully blocked nozzle. 1.5 (half again the commanded force) is already far
 # outside any plausible valve-to-force calibration error; a 0.15 N command then gives
-# 0.225 N, which the models still solve (they converge up to ~0.45 N on one jet).
+# 0.225 N, which the models still solve. Physical limit 3: the models converge up to
+# ~0.45 N on one jet, three times the rig's 0.15 N command.
 _GAIN_BOUNDS = (0.0, 1.5)
+_GAIN_LIMIT = 3.0
 
 
 class JetGain:
@@ -38,7 +40,9 @@ class JetGain:
     )
     parameters: ClassVar[tuple[EffectParameter, ...]] = tuple(
         EffectParameter(f"gain_{jet}", 1.0, *_GAIN_BOUNDS, "1",
-                        f"delivered / commanded force of jet {jet}")
+                        f"delivered / commanded force of jet {jet}", physical_upper=_GAIN_LIMIT,
+                        limit_reason="0: a blocked nozzle; 3: a full command would give 0.45 N, where the "
+                                     "models stop solving one jet")
         for jet in (1, 2, 3)
     )
     uses_actuation: ClassVar[bool] = False

@@ -11,10 +11,11 @@ from .base import EffectParameter
 if TYPE_CHECKING:
     from .problem import RodProblem
 
-# Jets sit 120 degrees apart: past +-60 degrees a misalignment is a relabelling of the
-# jets, not a misalignment. +-30 degrees covers a capsule glued on, or a rod clamped,
-# rotated by eye with room to spare.
+# Jets sit 120 degrees apart: past +-60 degrees (the physical limit) a misalignment is
+# a relabelling of the jets, not a misalignment. +-30 degrees covers a capsule glued
+# on, or a rod clamped, rotated by eye with room to spare.
 _LIMIT_RAD = math.pi / 6.0
+_RELABELLING_RAD = math.pi / 3.0
 
 
 class JetMisalignment:
@@ -38,7 +39,10 @@ class JetMisalignment:
     )
     parameters: ClassVar[tuple[EffectParameter, ...]] = (
         EffectParameter("ring_angle_rad", 0.0, -_LIMIT_RAD, _LIMIT_RAD, "rad",
-                        "rotation of the jet ring about the tip z axis, added to the profile's"),
+                        "rotation of the jet ring about the tip z axis, added to the profile's",
+                        physical_lower=-_RELABELLING_RAD, physical_upper=_RELABELLING_RAD,
+                        limit_reason="past 60 degrees the ring is closer to the next jet's place: a "
+                                     "relabelling of the jets"),
     )
     uses_actuation: ClassVar[bool] = False
 

@@ -18,7 +18,11 @@ if TYPE_CHECKING:
 # which the kernel has no curvature (NaN); a 0.15 N single jet with gravity across
 # stops solving at about -4.5e-5 m^2 (measured, both models), so -2e-5 keeps a factor
 # of two for a calibrated E below nominal and bends past the ~130 degrees of a sweep.
+# Physical limits: -4e-5 m^2, just short of where the models stop solving; 2e-3 m^2
+# (100 r^2): the section's moment nine times the linear one at the ~60 1/m of a 0.15 N
+# jet, the stiffening of a fibre-laden section pulled taut, beyond any elastomer.
 _BETA_BOUNDS_M2 = (-2e-5, 2e-4)
+_BETA_LIMITS_M2 = (-4e-5, 2e-3)
 
 
 class NonlinearElasticity:
@@ -45,7 +49,9 @@ class NonlinearElasticity:
     )
     parameters: ClassVar[tuple[EffectParameter, ...]] = (
         EffectParameter("beta_m2", 0.0, *_BETA_BOUNDS_M2, "m^2",
-                        "cubic stiffening coefficient (negative: softening)"),
+                        "cubic stiffening coefficient (negative: softening)", *_BETA_LIMITS_M2,
+                        limit_reason="-4e-5 m^2: softer sections stop solving at a 0.15 N bend; 2e-3 m^2: nine "
+                                     "times the linear moment at 60 1/m, past any fibre-laden elastomer"),
     )
     uses_actuation: ClassVar[bool] = False
 

@@ -18,7 +18,11 @@ if TYPE_CHECKING:
 # x 0.85 at 0.15 N, x 0.55 at 0.45 N): physically the lumens stiffen, but a bound
 # below zero lets a fit of an absent effect scatter around 0 instead of piling up on
 # a bound, and keeps the stiffness positive for any command the jets can reach.
+# Physical limits: -2 /N keeps EI positive with all three jets at full force (x 0.1 at
+# 0.45 N); 20 /N makes a lumen at full force ten times stiffer than its wall, a rigid
+# tube rather than a pressurised elastomer.
 _COEFFICIENT_BOUNDS_1_N = (-1.0, 4.0)
+_COEFFICIENT_LIMITS_1_N = (-2.0, 20.0)
 
 
 class PressureStiffening:
@@ -42,7 +46,10 @@ class PressureStiffening:
     )
     parameters: ClassVar[tuple[EffectParameter, ...]] = (
         EffectParameter("coefficient_1_n", 0.0, *_COEFFICIENT_BOUNDS_1_N, "1/N",
-                        "relative stiffness increase per newton of total jet force"),
+                        "relative stiffness increase per newton of total jet force",
+                        *_COEFFICIENT_LIMITS_1_N,
+                        limit_reason="-2: EI stays positive with every jet at 0.15 N; 20: a lumen ten times "
+                                     "stiffer than its wall at full force is a rigid tube"),
     )
     uses_actuation: ClassVar[bool] = True
 

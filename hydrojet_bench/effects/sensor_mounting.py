@@ -13,7 +13,10 @@ if TYPE_CHECKING:
 
 # 0.25 rad (14 degrees) per axis: a coil or IMU glued into the 9.8 mm capsule by eye is
 # off by a few degrees; anything near the bound is an assembly fault you can see.
+# Physical limit 0.8 rad (46 degrees) per axis: past it the sensor lies across its
+# capsule's bore, which it cannot fit in.
 _LIMIT_RAD = 0.25
+_PHYSICAL_LIMIT_RAD = 0.8
 
 
 class SensorMounting:
@@ -49,7 +52,9 @@ class SensorMounting:
     )
     parameters: ClassVar[tuple[EffectParameter, ...]] = tuple(
         EffectParameter(f"r{axis}_rad", 0.0, -_LIMIT_RAD, _LIMIT_RAD, "rad",
-                        f"{axis} component of the mounting rotation vector, tip frame")
+                        f"{axis} component of the mounting rotation vector, tip frame",
+                        -_PHYSICAL_LIMIT_RAD, _PHYSICAL_LIMIT_RAD,
+                        limit_reason="past 0.8 rad (46 degrees) the sensor lies across the capsule's bore")
         for axis in "xyz"
     )
     uses_actuation: ClassVar[bool] = False

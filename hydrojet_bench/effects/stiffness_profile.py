@@ -12,7 +12,10 @@ if TYPE_CHECKING:
 
 # -0.5 halves E at mid-span, +0.5 adds half: an elastomer mixed or cured that unevenly
 # along 70 mm is a bad batch; it also keeps E well above zero everywhere.
+# Physical limits: -0.9 leaves a tenth of E at mid-span (at -1 the rod has a hinge
+# there); +2 triples it, a sleeve or a second material rather than a curing gradient.
 _AMPLITUDE_BOUNDS = (-0.5, 0.5)
+_AMPLITUDE_LIMITS = (-0.9, 2.0)
 
 
 class StiffnessProfile:
@@ -41,7 +44,9 @@ class StiffnessProfile:
     )
     parameters: ClassVar[tuple[EffectParameter, ...]] = (
         EffectParameter("mid_span_amplitude", 0.0, *_AMPLITUDE_BOUNDS, "1",
-                        "relative change of E at mid-span over the linear profile"),
+                        "relative change of E at mid-span over the linear profile", *_AMPLITUDE_LIMITS,
+                        limit_reason="-0.9 leaves a tenth of E at mid-span (-1 is a hinge); +2 triples it, a "
+                                     "sleeve rather than a curing gradient"),
     )
     uses_actuation: ClassVar[bool] = False
 

@@ -80,7 +80,10 @@ class CalibrationPose:
 class CalibrationResult:
     """params: calibrated parameters. names/values/standard_errors: the fitted ones.
     correlation: their correlation matrix. unidentifiable: pairs with |corr| > 0.99.
-    rms_orientation_deg: RMS relative angle over the poses before and after."""
+    rms_orientation_deg: RMS relative angle over the poses before and after.
+    scaled_gradient_norm: largest component of the projected gradient of the cost
+    (half the sum of squared residuals) per parameter scale (`parameter_scale`) at the
+    result: zero at an optimum, bounds respected. stop_reason: why the fit stopped."""
 
     params: ModelParameters
     names: tuple[str, ...]
@@ -91,6 +94,8 @@ class CalibrationResult:
     rms_orientation_deg_before: float
     rms_orientation_deg_after: float
     evaluations: int
+    scaled_gradient_norm: float = float("nan")
+    stop_reason: str = ""
 
 
 DEFAULT_NAMES = PARAMETER_NAMES  # E0, EL, L and the six components of w_d: nine parameters
@@ -109,7 +114,8 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
               names: Sequence[str] = DEFAULT_NAMES, *,
               position_weight_rad_per_m: float = DEFAULT_POSITION_WEIGHT_RAD_PER_M,
               max_evaluations: int = 100, follow_path: bool = False,
-              fitted: Sequence[bool] | None = None, cost_tolerance: float = 1e-10) -> CalibrationResult:
+              fitted: Sequence[bool] | None = None, cost_tolerance: float = 1e-10,
+              gradient_tolerance: float | None = None) -> CalibrationResult:
     """Fit ``names`` to the poses by bounded nonlinear least squares (trust region
     reflective), starting from ``initial``. Raises ValueError for too few poses.
 
@@ -119,6 +125,12 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         the path state, so they need ``follow_path``.
     cost_tolerance: the fit stops once a step lowers the cost by less than this fraction
         (least_squares' ftol; its xtol and gtol stay at 1e-10).
+    gradient_tolerance: also stop once the scaled projected gradient (see
+        `CalibrationResult.scaled_gradient_norm`) is at most this.
+
+    The solver works in scaled variables x / `parameter_scale`, so its step and
+    gradient tests weigh every parameter alike (in raw units E0 ~ 3e5 Pa would
+    dominate every norm).
     """
     names = tuple(names)
     fit_mask = np.ones(len(poses), dtype=bool) if fitted is None else np.asarray(fitted, dtype=bool)
@@ -234,19 +246,42 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
             matrix[:, column] = (residual_rows(perturbed).ravel() - residuals) / step
         return matrix
 
+    # z = (x - start) / scale + 1: one unit per parameter scale, and the start at 1 (not
+    # 0) so that the solver's first trust region (|z0|) spans one scale per parameter.
+    offset = start / scales - 1.0
+    scaled_bounds = (bounds[0] / scales - offset, bounds[1] / scales - offset)
+    latest_jacobian: dict[bytes, np.ndarray] = {}
+
+    def scaled_jacobian(z: np.ndarray) -> np.ndarray:
+        latest_jacobian.clear()
+        latest_jacobian[z.tobytes()] = jacobian((z + offset) * scales) * scales
+        return latest_jacobian[z.tobytes()]
+
+    def projected_gradient(z: np.ndarray, rows: np.ndarray, matrix: np.ndarray) -> float:
+        # |z - clip(z - g)|: the gradient, less any part pushing out through a bound.
+        gradient = matrix.T @ rows
+        return float(np.max(np.abs(z - np.clip(z - gradient, *scaled_bounds)), initial=0.0))
+
+    def stop_at_gradient(intermediate) -> None:
+        z = intermediate.x
+        matrix = latest_jacobian.get(z.tobytes())
+        if matrix is not None and projected_gradient(z, intermediate.fun, matrix) <= gradient_tolerance:
+            raise StopIteration
+
     try:
         before = residual(start)
-        fit = least_squares(residual, start, jac=jacobian, bounds=bounds, x_scale=scales,
-                            max_nfev=max_evaluations, xtol=1e-10, ftol=cost_tolerance, gtol=1e-10)
+        fit = least_squares(lambda z: residual((z + offset) * scales), np.ones(len(names)), jac=scaled_jacobian,
+                            bounds=scaled_bounds, max_nfev=max_evaluations, xtol=1e-10, ftol=cost_tolerance,
+                            gtol=1e-10, callback=None if gradient_tolerance is None else stop_at_gradient)
     except ConvergenceError as error:
         raise ConvergenceError(f"calibration stopped: a model solve failed ({error})") from error
-    values = fit.x
+    values = (fit.x + offset) * scales
     final = residual(values)
     dof = max(final.size - len(names), 1)
     variance = float(final @ final) / dof
     # In scaled variables: the raw columns span ~15 decades (rad per Pa vs per N m), and
     # a pseudo-inverse of the raw J^T J would discard the small ones as rank-deficient.
-    scaled = fit.jac * scales
+    scaled = fit.jac
     covariance = variance * np.linalg.pinv(scaled.T @ scaled) * np.outer(scales, scales)
     standard_errors = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -263,7 +298,15 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         rms_orientation_deg_before=_rms_angle_deg(before, rows_per_pose),
         rms_orientation_deg_after=_rms_angle_deg(final, rows_per_pose),
         evaluations=int(fit.nfev),
+        scaled_gradient_norm=projected_gradient(fit.x, final, fit.jac),
+        stop_reason=_STOP_REASONS.get(fit.status, fit.message),
     )
+
+
+_STOP_REASONS = {
+    -2: "scaled projected gradient within tolerance", 0: "evaluation limit reached",
+    1: "gradient below 1e-10", 2: "cost change below tolerance", 3: "step below 1e-10", 4: "cost and step stalled",
+}
 
 
 def calibration_poses(steps: Dataset) -> list[CalibrationPose]:
