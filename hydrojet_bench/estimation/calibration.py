@@ -115,7 +115,7 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
               position_weight_rad_per_m: float = DEFAULT_POSITION_WEIGHT_RAD_PER_M,
               max_evaluations: int = 100, follow_path: bool = False,
               fitted: Sequence[bool] | None = None, cost_tolerance: float = 1e-10,
-              gradient_tolerance: float | None = None) -> CalibrationResult:
+              gradient_tolerance: float | None = None, variance_floor: float = 0.0) -> CalibrationResult:
     """Fit ``names`` to the poses by bounded nonlinear least squares (trust region
     reflective), starting from ``initial``. Raises ValueError for too few poses.
 
@@ -126,7 +126,9 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
     cost_tolerance: the fit stops once a step lowers the cost by less than this fraction
         (least_squares' ftol; its xtol and gtol stay at 1e-10).
     gradient_tolerance: also stop once the scaled projected gradient (see
-        `CalibrationResult.scaled_gradient_norm`) is at most this.
+        `CalibrationResult.scaled_gradient_norm`) is at most this times the residual
+        variance (the mean squared residual, or ``variance_floor`` if larger: the noise
+        variance where it is known), i.e. in the units of chi^2 / 2.
 
     The solver works in scaled variables x / `parameter_scale`, so its step and
     gradient tests weigh every parameter alike (in raw units E0 ~ 3e5 Pa would
@@ -262,10 +264,12 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         gradient = matrix.T @ rows
         return float(np.max(np.abs(z - np.clip(z - gradient, *scaled_bounds)), initial=0.0))
 
-    def stop_at_gradient(intermediate) -> None:
-        z = intermediate.x
+    def stop_at_gradient(intermediate_result) -> None:  # scipy picks the signature by this name
+        z = intermediate_result.x
         matrix = latest_jacobian.get(z.tobytes())
-        if matrix is not None and projected_gradient(z, intermediate.fun, matrix) <= gradient_tolerance:
+        rows = intermediate_result.fun
+        variance = max(variance_floor, float(rows @ rows) / rows.size)
+        if matrix is not None and projected_gradient(z, rows, matrix) <= gradient_tolerance * variance:
             raise StopIteration
 
     try:

@@ -13,10 +13,25 @@
      square against the floor's (F(3 n_held_out, floor dof), 1 % level), allowing for
      the parameters' own uncertainty, which adds about k / n_training to a prediction's
      mean square;
-   * otherwise the candidate with the best score among those that remove at least
-     half of the EXCESS squared error (``explained_fraction`` = (baseline^2 -
-     candidate^2) / (baseline^2 - floor^2), on held-out RMSEs) and beat the baseline's
-     score; ``unexplained`` when none does.
+   * otherwise the candidate with the best score among those whose fit converged,
+     that remove at least half of the EXCESS squared error (``explained_fraction`` =
+     (baseline^2 - candidate^2) / (baseline^2 - floor^2), on held-out RMSEs) and beat
+     the baseline's score; ``unexplained`` when none does. An unconverged fit never
+     qualifies and is ranked after every converged one.
+
+5. Ties: another qualifying candidate whose held-out errors are not significantly
+   larger than the winner's (a one-sided paired t test on the per-step squared errors
+   of the held-out steps, at the ``significance`` level) explains the data as well
+   within noise: it is listed as an alternative, and `separate` proposes the poses
+   where their predictions differ most.
+6. Depth: while the winner leaves a held-out error above the at-the-floor threshold,
+   the winner joins the baseline (its calibrated parameters the start) and the
+   remaining candidates are tried on top of it, up to ``depth`` effects in all; each
+   found effect carries its share of the first baseline's excess squared error.
+
+A setup stage (issue 17: a swapped cable, a sensor on the wrong side) belongs before
+the physics: ``DiagnosisSettings.setup`` gets the problem and the calibrated baseline
+and returns effects that join the baseline before any candidate is tried.
 
 Score: BIC on the TRAINING residuals with the noise scale fixed at the measured floor,
 chi^2 + k ln(n) (chi^2 = training sum of squares / sigma^2, k fitted parameters, n
@@ -30,20 +45,23 @@ grow), so of two candidates that explain the data alike, the one with fewer para
 wins. Why sigma fixed: the floor is measured independently of every model, so score
 differences are likelihood ratios (a difference above 10 is "very strong" evidence in
 Kass and Raftery's scale); candidates whose score is within that of the winner's are
-reported as hard to tell apart.
+reported as hard to tell apart when the held-out test (5.) cannot separate them.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Protocol
 
 import numpy as np
 from scipy.stats import f as f_distribution
+from scipy.stats import t as t_distribution
 
 from ...data.dataset import Dataset
 from ...effects import LIBRARY, Effect, load_effect, qualified_parameter_names
+from ...effects.base import at_physical_limits
 from ...errors import UserError
 from ...estimation.online import OnlineSettings
 from ...geometry import rotation_angle_deg
@@ -52,11 +70,19 @@ from .evidence import (NOISE_GAP_PER_FLOOR, OnlineEvidence, cosine, hysteresis_g
                        rmse_by_jet, rotation_between)
 from .fitting import Fit, Problem, fit, fit_candidates, session_gravity
 from .noise import NoiseFloor, estimate_noise_floor
+from .separate import SeparatingPose, separating_poses
 from .split import Split, split_session
 
 NONE, UNEXPLAINED = "none", "unexplained"
-# Kass and Raftery (1995): a BIC difference above 10 is very strong evidence.
-AMBIGUITY_SCORE = 10.0
+DEFAULT_DEPTH = 3
+AT_BOUND_NOTE = "at its bound: may be larger"
+
+
+class SetupStage(Protocol):
+    """Setup hypotheses tried before the physics: given the fit problem and the
+    calibrated baseline, the effects (setup errors) to add to the baseline."""
+
+    def __call__(self, problem: Problem, baseline: Fit) -> tuple[Effect, ...]: ...
 
 
 @dataclass(frozen=True)
@@ -64,13 +90,16 @@ class DiagnosisSettings:
     """significance: level of the at-the-floor F test. min_explained_fraction: share of
     the excess squared held-out error a winner must remove. workers: processes for the
     candidate fits (None: up to 2). online: the estimator used for the evidence.
-    window_s: averaging window of the steps (for the within-window noise estimate)."""
+    window_s: averaging window of the steps (for the within-window noise estimate).
+    depth: most effects named in one diagnosis. setup: the setup stage, if any."""
 
     significance: float = 0.01
     min_explained_fraction: float = 0.5
     workers: int | None = None
     online: OnlineSettings = field(default_factory=OnlineSettings)
     window_s: float = 1.0
+    depth: int = DEFAULT_DEPTH
+    setup: SetupStage | None = None
 
 
 @dataclass(frozen=True)
@@ -81,7 +110,10 @@ class CandidateResult:
     difference to the baseline's, whether it passes both tests (``qualifies``), and the
     evidence: held-out RMSE per driving jet, hysteresis gap of its residuals (deg),
     cosine of its signature with the baseline residual and with the online
-    disturbance estimate. error: why its fit failed, if it did."""
+    disturbance estimate. error: why its fit failed, if it did. converged and
+    convergence: whether its fit converged, and why (see `fitting`). at_bound: its
+    parameters that ended on a bound (after widening to the physical limits when
+    ``widened``): the value may be larger."""
 
     effect: str
     explanation: str
@@ -97,10 +129,23 @@ class CandidateResult:
     online_correlation: float
     evaluations: int
     error: str | None = None
+    converged: bool = False
+    convergence: str = ""
+    at_bound: tuple[str, ...] = ()
+    widened: bool = False
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """What keeps this fit from being final: unconverged, on a bound."""
+        notes = [] if self.converged or self.error is not None else ["not converged"]
+        notes += [f"{name.partition('.')[2]} {AT_BOUND_NOTE}" for name in self.at_bound]
+        return tuple(notes)
 
     def as_dict(self) -> dict:
         return {
-            "effect": self.effect, "heldout_orientation_rmse_deg": _number(self.heldout_orientation_rmse_deg),
+            "effect": self.effect, "converged": self.converged, "convergence": self.convergence,
+            "at_bound": list(self.at_bound), "bounds_widened": self.widened, "notes": list(self.notes),
+            "heldout_orientation_rmse_deg": _number(self.heldout_orientation_rmse_deg),
             "explained_fraction": _number(self.explained_fraction), "score": _number(self.score),
             "score_change": _number(self.score_change), "qualifies": self.qualifies,
             "parameters": {name: {"value": _number(value), "standard_error": _number(error)}
@@ -112,15 +157,40 @@ class CandidateResult:
 
 
 @dataclass(frozen=True)
+class FoundEffect:
+    """One effect a diagnosis names: its share of the first baseline's excess squared
+    held-out error (over the floor), the held-out RMSE once it is added (deg), its
+    fitted parameters (name -> (value, standard error)) and what keeps it from being
+    final (`CandidateResult.notes`)."""
+
+    effect: str
+    share_of_excess: float
+    heldout_orientation_rmse_deg: float
+    parameters: dict[str, tuple[float, float]]
+    notes: tuple[str, ...]
+
+    def as_dict(self) -> dict:
+        return {"effect": self.effect, "share_of_excess": _number(self.share_of_excess),
+                "heldout_orientation_rmse_deg": _number(self.heldout_orientation_rmse_deg),
+                "parameters": {name: {"value": _number(value), "standard_error": _number(error)}
+                               for name, (value, error) in self.parameters.items()},
+                "notes": list(self.notes)}
+
+
+@dataclass(frozen=True)
 class Diagnosis:
     """The outcome of `diagnose`; see the module docstring for the rules.
 
     verdict: "none", "unexplained" or the winning effect's name. explanation: the
     winner's physics in words (or why there is none). ranking: the qualifying candidates
-    by score (the winner first), then the others by score, then failed fits. alternatives: qualifying candidates within
-    `AMBIGUITY_SCORE` of the winner. at_floor_threshold_deg: the largest held-out RMSE
+    by score (the winner first), then the other converged fits by score, then the
+    unconverged ones, then failed fits. alternatives: qualifying candidates the held-out
+    test cannot tell from the winner. at_floor_threshold_deg: the largest held-out RMSE
     the F test calls "at the floor". remaining_excess: whether the winner still leaves
-    a held-out error above that threshold (more physics missing).
+    a held-out error above that threshold (more physics missing). stages: the later
+    stages (the winner added to the baseline, the rest tried on top). found: every
+    effect named, over all stages. separating_poses: where the winner and its
+    alternatives differ most (empty without alternatives).
     """
 
     verdict: str
@@ -144,10 +214,23 @@ class Diagnosis:
     held_out_rows: np.ndarray
     held_out_sweep: np.ndarray
     elapsed_s: float
+    stages: tuple[Diagnosis, ...] = ()
+    found: tuple[FoundEffect, ...] = ()
+    separating_poses: tuple[SeparatingPose, ...] = ()
+    candidate_fits: dict[str, Fit] = field(default_factory=dict)
+
+    @property
+    def winner_fit(self) -> Fit | None:
+        return self.candidate_fits.get(self.verdict)
 
     @property
     def noise_floor_deg(self) -> float:
         return self.noise.orientation_deg
+
+    @property
+    def final(self) -> Diagnosis:
+        """The last stage (this one when there is no later stage)."""
+        return self.stages[-1] if self.stages else self
 
     @property
     def winner(self) -> CandidateResult | None:
@@ -164,12 +247,20 @@ class Diagnosis:
                 "parameters": {name: {"value": _number(value), "standard_error": _number(error)}
                                for name, value, error in zip(self.baseline.names, self.baseline.values,
                                                              self.baseline.standard_errors)},
+                "converged": self.baseline.converged, "convergence": self.baseline.convergence,
                 "rmse_by_jet_deg": self.baseline_rmse_by_jet_deg,
                 "online_heldout_orientation_rmse_deg": self.online.online_rmse_deg,
             },
             "ranking": [candidate.as_dict() for candidate in self.ranking],
             "alternatives": list(self.alternatives),
             "remaining_excess": self.remaining_excess,
+            "effects": [effect.as_dict() for effect in self.found],
+            "final_remaining_excess": self.final.remaining_excess,
+            "stages": [{"known_effects": list(stage.known_effects), "verdict": stage.verdict,
+                        "baseline_heldout_rmse_deg": stage.baseline_heldout_rmse_deg,
+                        "alternatives": list(stage.alternatives), "remaining_excess": stage.remaining_excess,
+                        "ranking": [candidate.as_dict() for candidate in stage.ranking]} for stage in self.stages],
+            "separating_poses": [pose.as_dict() for pose in self.separating_poses],
             "evidence": {
                 "loading_unloading": {
                     "baseline_hysteresis_gap_deg": self.baseline_hysteresis_gap_deg,
@@ -232,12 +323,63 @@ def diagnose(steps: Dataset, model_name: str = "cosserat", known_effects: Sequen
         orientation_sigma_rad=noise.orientation_axis_rad,
         position_weight_rad_per_m=0.0 if not position_sigma else noise.orientation_axis_rad / position_sigma)
     baseline = fit(problem)
-    say(f"baseline calibrated ({baseline.evaluations} evaluations)")
+    say(f"baseline calibrated ({baseline.convergence})")
+    if settings.setup is not None:
+        found_setup = settings.setup(problem, baseline)
+        if found_setup:
+            known = known + tuple(found_setup)
+            problem = _with_known(problem, found_setup)
+            baseline = fit(problem, start=baseline.params)
+    first = _stage(problem, known, noise, baseline, candidates, settings, started, say)
+    stages, current = [], first
+    while (current.verdict not in (NONE, UNEXPLAINED) and current.remaining_excess
+           and len(stages) + 1 < settings.depth):
+        winner = next(c for c in candidates if c.name == current.verdict)
+        added = at_physical_limits(winner) if current.winner.widened else winner
+        remaining = tuple(c for c in candidates if c.name != winner.name
+                          and all(c.name != name for name in (current.known_effects + (winner.name,))))
+        if not remaining:
+            break
+        problem = _with_known(problem, (added,))
+        known = known + (added,)
+        say(f"{winner.name} joins the baseline; trying the rest on top of it")
+        current = _stage(problem, known, noise, current.winner_fit, remaining, settings, started, say)
+        stages.append(current)
+    found = _found(first, stages)
+    return replace(first, stages=tuple(stages), found=found, elapsed_s=time.perf_counter() - started)
+
+
+def _with_known(problem: Problem, effects: Sequence[Effect]) -> Problem:
+    """``problem`` with ``effects`` (calibrated from now on) in its baseline."""
+    names = tuple(name for effect in effects for name in qualified_parameter_names(effect))
+    return replace(problem, baseline_effects=problem.baseline_effects + tuple(effects),
+                   known_names=problem.known_names + names)
+
+
+def _stage(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseline: Fit,
+           candidates: Sequence[Effect], settings: DiagnosisSettings, started: float,
+           say: Callable[[str], None]) -> Diagnosis:
+    """One round: every candidate on top of ``baseline``, and the decision."""
     fits = fit_candidates(problem, candidates, baseline, settings.workers,
-                          progress=lambda done: say(f"fitted {done.effect}"))
-    online = online_evidence(problem.model(), baseline.params, steps, split.held_out, problem.gravity_in_base_m_s2,
-                             settings.online)
+                          progress=lambda done: say(f"fitted {done.effect} ({done.convergence})"))
+    online = online_evidence(problem.model(), baseline.params, problem.steps, problem.split.held_out,
+                             problem.gravity_in_base_m_s2, settings.online)
     return _decide(problem, known, noise, baseline, candidates, fits, online, settings, started)
+
+
+def _found(first: Diagnosis, stages: Sequence[Diagnosis]) -> tuple[FoundEffect, ...]:
+    """Each stage's winner with its share of the first baseline's excess."""
+    excess = first.baseline_heldout_rmse_deg**2 - first.noise_floor_deg**2
+    found, before = [], first.baseline_heldout_rmse_deg
+    for stage in (first, *stages):
+        winner = stage.winner
+        if winner is None:
+            break
+        share = (before**2 - winner.heldout_orientation_rmse_deg**2) / excess if excess > 0.0 else 0.0
+        found.append(FoundEffect(winner.effect, float(share), winner.heldout_orientation_rmse_deg,
+                                 winner.parameters, winner.notes))
+        before = winner.heldout_orientation_rmse_deg
+    return tuple(found)
 
 
 def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseline: Fit, candidates: Sequence[Effect],
@@ -248,9 +390,11 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
     measured = steps.tip_orientation_in_base()[held_out]
     floor = noise.orientation_deg
 
+    def heldout_errors(result: Fit) -> np.ndarray:
+        return rotation_angle_deg(result.predictions.tip_orientation_in_base[held_out], measured)
+
     def heldout_rmse(result: Fit) -> float:
-        errors = rotation_angle_deg(result.predictions.tip_orientation_in_base[held_out], measured)
-        return float(np.sqrt(np.mean(errors**2)))
+        return float(np.sqrt(np.mean(heldout_errors(result) ** 2)))
 
     def score(result: Fit) -> float:
         return result.training_chi2 + result.parameter_count * float(np.log(max(result.training_rows, 2)))
@@ -272,7 +416,8 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
         own = set(qualified_parameter_names(candidate))
         if result.predictions is None:
             results.append(CandidateResult(candidate.name, candidate.explanation, {}, np.inf, -np.inf, np.inf, np.inf,
-                                           False, {}, None, 0.0, 0.0, result.evaluations, result.error))
+                                           False, {}, None, 0.0, 0.0, result.evaluations, result.error,
+                                           convergence=f"fit failed: {result.error}"))
             continue
         rmse = heldout_rmse(result)
         held = result.predictions.select(held_out)
@@ -286,12 +431,14 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
                         in zip(result.names, result.values, result.standard_errors) if name in own},
             heldout_orientation_rmse_deg=rmse, explained_fraction=float(explained), score=candidate_score,
             score_change=candidate_score - base_score,
-            qualifies=bool(explained >= settings.min_explained_fraction and candidate_score < base_score),
+            qualifies=bool(result.converged and explained >= settings.min_explained_fraction
+                           and candidate_score < base_score),
             rmse_by_jet_deg=rmse_by_jet(held, held_steps), hysteresis_gap_deg=hysteresis_gap_deg(held, held_steps),
             residual_correlation=cosine(signature, residual),
             online_correlation=cosine(online.equivalent_moment_nm(signature), online.missing_moment_nm),
-            evaluations=result.evaluations))
-    ranking = tuple(sorted(results, key=lambda c: (c.error is not None, not c.qualifies, c.score)))
+            evaluations=result.evaluations, converged=result.converged, convergence=result.convergence,
+            at_bound=result.at_bound, widened=result.widened))
+    ranking = tuple(sorted(results, key=lambda c: (c.error is not None, not c.converged, not c.qualifies, c.score)))
     qualifying = [c for c in ranking if c.qualifies]
     alternatives: tuple[str, ...] = ()
     remaining = False
@@ -310,7 +457,11 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
     else:
         winner = qualifying[0]
         verdict = winner.effect
-        alternatives = tuple(c.effect for c in qualifying[1:] if c.score - winner.score < AMBIGUITY_SCORE)
+        by_name = dict(zip((c.name for c in candidates), fits))
+        winner_errors = heldout_errors(by_name[winner.effect])
+        alternatives = tuple(c.effect for c in qualifying[1:]
+                             if not _significantly_worse(heldout_errors(by_name[c.effect]), winner_errors,
+                                                         settings.significance))
         remaining = winner.heldout_orientation_rmse_deg > threshold
         explanation = winner.explanation
     return Diagnosis(
@@ -321,7 +472,32 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
         baseline_hysteresis_gap_deg=hysteresis_gap_deg(base_held, held_steps), at_floor_threshold_deg=threshold,
         ranking=ranking, alternatives=alternatives, remaining_excess=remaining, online=online,
         signatures_deg=signatures, baseline_residual_deg=np.degrees(residual), held_out_rows=np.flatnonzero(held_out),
-        held_out_sweep=steps.sweep[held_out], elapsed_s=time.perf_counter() - started)
+        held_out_sweep=steps.sweep[held_out], elapsed_s=time.perf_counter() - started,
+        separating_poses=_separating(problem, candidates, fits, (verdict, *alternatives)) if alternatives else (),
+        candidate_fits={candidate.name: result for candidate, result in zip(candidates, fits)})
+
+
+def _significantly_worse(errors_deg: np.ndarray, best_errors_deg: np.ndarray, significance: float) -> bool:
+    """One-sided paired t test on the held-out steps' squared errors: are ``errors_deg``
+    larger than ``best_errors_deg`` beyond what noise gives at ``significance``?"""
+    difference = errors_deg**2 - best_errors_deg**2
+    spread = float(np.std(difference, ddof=1))
+    if spread == 0.0:
+        return bool(np.mean(difference) > 0.0)
+    statistic = float(np.mean(difference)) / (spread / np.sqrt(len(difference)))
+    return statistic > float(t_distribution.ppf(1.0 - significance, len(difference) - 1))
+
+
+def _separating(problem: Problem, candidates: Sequence[Effect], fits: Sequence[Fit],
+                names: Sequence[str]) -> tuple[SeparatingPose, ...]:
+    """Where the tied candidates' calibrated models differ most."""
+    models = []
+    for candidate, result in zip(candidates, fits):
+        if candidate.name in names and result.params is not None:
+            effect = at_physical_limits(candidate) if result.widened else candidate
+            models.append((candidate.name, problem.model(effect), result.params))
+    return separating_poses(models, problem.steps.profile.max_jet_force_n,
+                            problem.gravity_in_base_m_s2.mean(axis=0))
 
 
 def _number(value: float) -> float | None:

@@ -22,10 +22,33 @@ Candidates are fitted in worker processes (``workers``, forked by Dask's process
 scheduler, so effects loaded from user files travel along); each starts from the calibrated baseline with its own
 parameters at their defaults (which leave the model unchanged), so it only has to move
 away from an optimum it already shares.
+
+Convergence: the solver works in parameters scaled by their typical magnitude, and a
+fit has converged when the projected gradient of chi^2 per parameter scale is at most
+`GRADIENT_TOLERANCE` (a Newton step then gains < 0.01 in chi^2 for any parameter the
+data see), whatever stopped the solver. chi^2 here takes the larger of the noise
+variance and the fit's own residual variance: a model far from the data carries
+residuals many times the noise, and with them finite-difference noise in its gradient
+that no further step removes; a fit that ran out of evaluations first is
+continued once with a larger budget and otherwise reported unconverged. The cost is
+not convex in every effect's parameters (a mounting about the wrong axis, a gain on
+the wrong side of E's trade-off), so before fitting a candidate a coarse scan of its
+own parameters, the baseline's held fixed (a grid for one or two parameters, a step
+either way along each axis for more), looks for a better basin; when one is found the
+candidate is fitted from there too and the better fit kept.
+
+Bounds: a fit that ends on a search bound of its effect (one that is not the
+parameter's no-effect default) is refitted with the bounds widened to the physical
+limits (`EffectParameter.limits`); a fit still on a bound is flagged (``at_bound``).
+
+Standard errors: from the scaled Jacobian at the optimum with the noise variance the
+diagnosis measured (not the fit's own residual variance, which a missing effect would
+inflate).
 """
 
 from __future__ import annotations
 
+import itertools
 import multiprocessing
 import os
 from collections.abc import Callable, Sequence
@@ -39,25 +62,34 @@ from dask.callbacks import Callback
 
 from ...data.dataset import Dataset
 from ...effects import Effect, qualified_parameter_names
+from ...effects.base import at_physical_limits
 from ...errors import ConvergenceError
 from ...estimation.calibration import DEFAULT_NAMES, CalibrationPose, calibrate, calibration_poses
 from ...estimation.path import REF, PathPredictor, Predictions
 from ...geometry import body_rotation_error, matrix_from_quat
 from ...models import make_model
 from ...models.shooting import ShootingModel
-from ...params import ModelParameters
+from ...params import ModelParameters, with_parameters
 from .measurements import tip_sensor_offset_in_tip_m, tip_sensor_position_in_base_m
 from .split import Split
 
 # A candidate starts at the baseline's optimum: a few dozen evaluations converge it; a
-# fit that needs more is chasing a parameter the data barely sees.
+# fit still unconverged then gets `CONTINUATION_EVALUATIONS` more once.
 CANDIDATE_MAX_EVALUATIONS = 40
 BASELINE_MAX_EVALUATIONS = 100
-# Fits stop once a step gains less than this fraction of the cost: at a good fit (chi^2 ~
-# the number of residual rows, ~600) that is 1e-3 in chi^2, far below the score
-# differences that decide (ln n ~ 6 per parameter). calibrate's own 1e-10 costs 40 % more
-# evaluations for digits nobody reads.
-COST_TOLERANCE = 1e-6
+CONTINUATION_EVALUATIONS = 60
+# Converged: the projected gradient of chi^2 per parameter scale at most this (see the
+# module docstring).
+GRADIENT_TOLERANCE = 0.1
+# The solver may also stop once a step gains less than this fraction of the cost (1e-6
+# of chi^2 ~ 600 is far below any score difference); the gradient test then judges.
+COST_TOLERANCE = 1e-9
+# A fitted value within this share of its bounds' span from a bound sits on it.
+BOUND_SHARE = 1e-3
+# The coarse scan: grid points per parameter for one- and two-parameter effects, and
+# the step along each axis (share of the bounds' span) for more.
+SCAN_POINTS = {1: 9, 2: 5}
+SCAN_AXIS_SHARE = 0.25
 # A base that tilts less than this over a session is clamped (tracker noise is ~0.7 deg
 # per sample, ~0.1 deg per averaged step).
 STATIC_BASE_DEG = 2.0
@@ -87,10 +119,24 @@ class Fit:
     evaluations: int
     unidentifiable: tuple[tuple[str, str, float], ...] = ()
     error: str | None = None
+    converged: bool = False
+    stop_reason: str = ""
+    scaled_gradient: float = float("nan")
+    at_bound: tuple[str, ...] = ()
+    widened: bool = False
+    starts: int = 1
 
     @property
     def parameter_count(self) -> int:
         return len(self.names)
+
+    @property
+    def convergence(self) -> str:
+        """Why the fit is (or is not) taken as converged, in words."""
+        verdict = "converged" if self.converged else "NOT converged"
+        return (f"{verdict}: {self.stop_reason} after {self.evaluations} evaluations, scaled gradient "
+                f"{self.scaled_gradient:.2g} (tolerance {GRADIENT_TOLERANCE:g}), {self.starts} start(s)"
+                + (", bounds widened to the physical limits" if self.widened else ""))
 
 
 @dataclass(frozen=True)
@@ -160,15 +206,27 @@ def training_poses(problem: Problem) -> list[CalibrationPose]:
 def fit(problem: Problem, candidate: Effect | None = None, start: ModelParameters | None = None,
         max_evaluations: int = BASELINE_MAX_EVALUATIONS) -> Fit:
     """Calibrate the baseline (or baseline + ``candidate``) on the training steps from
-    ``start`` (default: the initial parameters), then predict the whole session."""
+    ``start`` (default: the initial parameters), then predict the whole session; an
+    unconverged fit is continued once (`CONTINUATION_EVALUATIONS`)."""
+    result = _fit_once(problem, candidate, start or problem.initial, max_evaluations)
+    if result.error is None and not result.converged:
+        more = _fit_once(problem, candidate, result.params, CONTINUATION_EVALUATIONS)
+        if more.error is None and more.training_chi2 <= result.training_chi2:
+            result = replace(more, evaluations=result.evaluations + more.evaluations)
+    return result
+
+
+def _fit_once(problem: Problem, candidate: Effect | None, start: ModelParameters, max_evaluations: int) -> Fit:
     model = problem.model(candidate)
     names = problem.names(candidate)
     split = problem.split
     label = None if candidate is None else candidate.name
+    sigma2 = problem.orientation_sigma_rad**2
     try:
-        result = calibrate(model, training_poses(problem), start or problem.initial, names,
+        result = calibrate(model, training_poses(problem), start, names,
                            position_weight_rad_per_m=problem.position_weight_rad_per_m,
                            max_evaluations=max_evaluations, follow_path=True, cost_tolerance=COST_TOLERANCE,
+                           gradient_tolerance=GRADIENT_TOLERANCE / 2.0, variance_floor=sigma2,
                            fitted=split.training[split.solved])
         predictions, sensor_positions = predict_path(model, result.params, problem.steps,
                                                      problem.gravity_in_base_m_s2)
@@ -180,21 +238,107 @@ def fit(problem: Problem, candidate: Effect | None = None, start: ModelParameter
         nothing = np.full(len(names), np.nan)
         return Fit(label, names, nothing, nothing, None, None, None, np.inf, 0, 0, error=str(error))
     chi2, rows = training_chi2(problem, predictions, sensor_positions)
-    return Fit(label, names, result.values, result.standard_errors, result.params, predictions, sensor_positions,
-               chi2, rows, result.evaluations, result.unidentifiable)
+    # calibrate scales its covariance by the residual variance, chi2 sigma^2 / dof; the
+    # measured noise variance is sigma^2.
+    standard_errors = result.standard_errors * np.sqrt(max(rows - len(names), 1) / max(chi2, 1e-300))
+    # Of chi^2 (see the module docstring), per parameter scale.
+    gradient = 2.0 * result.scaled_gradient_norm / (sigma2 * max(1.0, chi2 / rows))
+    return Fit(label, names, result.values, standard_errors, result.params, predictions, sensor_positions,
+               chi2, rows, result.evaluations, result.unidentifiable, converged=gradient <= GRADIENT_TOLERANCE,
+               stop_reason=result.stop_reason, scaled_gradient=gradient,
+               at_bound=_at_bound(candidate, dict(zip(names, result.values))))
+
+
+def _at_bound(candidate: Effect | None, values: dict[str, float]) -> tuple[str, ...]:
+    """The candidate's parameters that sit on a search bound other than their default."""
+    if candidate is None:
+        return ()
+    clipped = []
+    for parameter in candidate.parameters:
+        value = values[f"{candidate.name}.{parameter.name}"]
+        margin = BOUND_SHARE * (parameter.upper - parameter.lower)
+        for bound in (parameter.lower, parameter.upper):
+            if abs(value - bound) <= margin and bound != parameter.default:
+                clipped.append(f"{candidate.name}.{parameter.name}")
+    return tuple(clipped)
+
+
+def fit_candidate(problem: Problem, candidate: Effect, baseline: ModelParameters,
+                  max_evaluations: int = CANDIDATE_MAX_EVALUATIONS) -> Fit:
+    """Fit ``candidate`` on top of the calibrated ``baseline``: from the baseline with the
+    candidate at its defaults and, when the coarse scan finds a better basin, from there
+    too (the better fit is kept); then, if it ends on a search bound, again with the
+    bounds widened to the physical limits (see the module docstring)."""
+    starts = [baseline] + scan_starts(problem, candidate, baseline)
+    fits = [fit(problem, candidate, start, max_evaluations) for start in starts]
+    best = min(fits, key=_preference)
+    if best.error is None and best.at_bound:
+        widened_effect = at_physical_limits(candidate)
+        if any(p.limits != (p.lower, p.upper) for p in candidate.parameters):
+            wider = fit(problem, widened_effect, best.params, max_evaluations)
+            if wider.error is None and _preference(wider) <= _preference(best):
+                best = replace(wider, widened=True)
+    return replace(best, starts=len(starts), evaluations=sum(f.evaluations for f in fits)
+                   + (best.evaluations if best.widened else 0))
+
+
+def _preference(result: Fit) -> tuple[bool, float]:
+    """Converged fits before unconverged ones, then the lower training chi^2."""
+    return (not result.converged, result.training_chi2)
+
+
+def scan_starts(problem: Problem, candidate: Effect, baseline: ModelParameters) -> list[ModelParameters]:
+    """The best point of a coarse scan of the candidate's own parameters (the
+    baseline's held fixed) as a second start, when it beats the defaults' chi^2 by more
+    than one; else none."""
+    parameters = candidate.parameters
+    names = qualified_parameter_names(candidate)
+    if len(parameters) in SCAN_POINTS:
+        axes = [np.linspace(p.lower, p.upper, SCAN_POINTS[len(parameters)]) for p in parameters]
+        points = [dict(zip(names, values)) for values in itertools.product(*axes)]
+    else:
+        points = []
+        for parameter, name in zip(parameters, names):
+            step = SCAN_AXIS_SHARE * (parameter.upper - parameter.lower)
+            points += [{name: value} for value in (parameter.default - step, parameter.default + step)
+                       if parameter.lower <= value <= parameter.upper]
+    defaults = {name: p.default for name, p in zip(names, parameters)}
+    model = problem.model(candidate)
+    reference = training_cost(problem, model, with_parameters(baseline, defaults))
+    best, best_cost = None, reference - 1.0
+    for point in points:
+        trial = with_parameters(baseline, {**defaults, **point})
+        cost = training_cost(problem, model, trial)
+        if cost < best_cost:
+            best, best_cost = trial, cost
+    return [] if best is None else [best]
+
+
+def training_cost(problem: Problem, model: ShootingModel, params: ModelParameters) -> float:
+    """Training chi^2 of ``params`` along the solved prefix (inf when a solve fails)."""
+    prefix = np.flatnonzero(problem.split.solved)
+    try:
+        predictions, positions = predict_path(model, params, problem.steps.select(prefix),
+                                              problem.gravity_in_base_m_s2[prefix])
+    except (ConvergenceError, ValueError):
+        return float("inf")
+    rows = residual_rows(problem, predictions, positions, problem.split.training[prefix])
+    return float(np.sum(rows**2) / problem.orientation_sigma_rad**2)
 
 
 def residual_rows(problem: Problem, predictions: Predictions, sensor_positions_m: np.ndarray,
                   mask: np.ndarray) -> np.ndarray:
     """(n, 3 or 6) residual rows of the masked steps: orientation rotation vectors (rad),
-    then weighted tip sensor position errors when measured (see the module docstring)."""
+    then weighted tip sensor position errors when measured (see the module docstring).
+    The predictions may cover a prefix of the session only; ``mask`` then covers it too."""
     steps = problem.steps
+    count = len(mask)
     rotation = body_rotation_error(matrix_from_quat(predictions.tip_orientation_in_base[mask]),
-                                   matrix_from_quat(steps.tip_orientation_in_base()[mask]))
+                                   matrix_from_quat(steps.tip_orientation_in_base()[:count][mask]))
     measured = tip_sensor_position_in_base_m(steps)
     if measured is None or problem.position_weight_rad_per_m == 0.0:
         return rotation
-    offset = sensor_positions_m[mask] - measured[mask]
+    offset = sensor_positions_m[mask] - measured[:count][mask]
     return np.hstack([rotation, problem.position_weight_rad_per_m * offset])
 
 
@@ -213,7 +357,7 @@ _WORK: tuple[Problem, tuple[Effect, ...], ModelParameters] | None = None
 def _fit_candidate(index: int) -> Fit:
     assert _WORK is not None
     problem, candidates, start = _WORK
-    return fit(problem, candidates[index], start, CANDIDATE_MAX_EVALUATIONS)
+    return fit_candidate(problem, candidates[index], start)
 
 
 def default_workers() -> int:
