@@ -1,10 +1,12 @@
-"""`hydrojet-bench diagnose INPUT [--model M] [--effect NAME ...] [--json PATH] [--report DIR]`.
+"""`hydrojet-bench diagnose INPUT [--model M] [--effect NAME ...] [--depth N] [--json PATH] [--report DIR]
+[--separating-plan PATH]`.
 
 Which physical effect is the model missing? Calibrates the baseline (the model with the
 known --effect's) and the baseline plus each candidate effect on part of the session,
 scores each on the held-out repetitions against the noise floor measured from the data,
-and names the effect that explains the excess error, if one does
-(`hydrojet_bench.analysis.diagnosis`).
+and names the effect that explains the excess error, if one does, then continues on top
+of it while excess remains (`hydrojet_bench.analysis.diagnosis`). When candidates tie, a
+plan of the poses that tell them apart is written (never over an existing file).
 """
 
 from __future__ import annotations
@@ -16,8 +18,12 @@ from rich.console import Console
 from rich.panel import Panel
 
 from ..analysis.diagnosis import NONE, UNEXPLAINED, Diagnosis, DiagnosisSettings, diagnose
+from ..analysis.diagnosis.engine import DEFAULT_DEPTH
 from ..analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
 from ..analysis.diagnosis.noise import repeatability_floor
+from ..analysis.diagnosis.separate import separating_plan, write_separating_plan
+from ..files import check_writable_target, create_numbered
+from ..plans import DEFAULT_SETTLE_S
 from ..inputs import load_dataset
 from ..effects import load_effect
 from ..errors import ConvergenceError, UserError
@@ -38,6 +44,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="processes for the candidate fits (default: up to 2)")
     render.add_json_argument(parser, "the diagnosis")
     parser.add_argument("--report", type=Path, metavar="DIR", help="write figures (PNG) to this folder")
+    parser.add_argument("--depth", type=int, default=DEFAULT_DEPTH, metavar="N",
+                        help=f"name up to N effects, each on top of the ones before (default {DEFAULT_DEPTH})")
+    parser.add_argument("--separating-plan", type=Path, metavar="PATH",
+                        help="where to write the plan that tells tied candidates apart (default: "
+                             "separating-plan.toml in the --report folder, else beside INPUT; never overwritten)")
     parser.epilog = ("--effect names effects known to be present: they join the baseline (gravity at its nominal "
                      "weight, E0, EL, L, w_d) and are calibrated with it. Every --candidate is then tried on top.")
     parser.set_defaults(func=run)
@@ -46,6 +57,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.workers is not None and args.workers < 1:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
+    if args.depth < 1:
+        raise UserError(f"--depth must be at least 1, got {args.depth}")
+    if args.separating_plan is not None:
+        check_writable_target(args.separating_plan, "plan file", overwrite=False)
     choice = model_choice(args)  # validates --effect before the data is read
     candidates = tuple(load_effect(spec) for spec in dict.fromkeys(args.candidate)) or None
     profile, steps = load_steps(args.input, args.profile)
@@ -60,7 +75,25 @@ def run(args: argparse.Namespace) -> int:
 
         for path in write_diagnosis_report(args.report, diagnosis):
             console.print(f"wrote {render.plain(path)}")
+    if diagnosis.separating_poses:
+        path = _write_separating_plan(args, diagnosis)
+        console.print(f"wrote {render.plain(path)}: the poses that tell {', '.join(_tied(diagnosis))} apart; "
+                      f"run it with `run --plan {render.plain(path)}` and diagnose the new session")
     return 0
+
+
+def _tied(diagnosis: Diagnosis) -> tuple[str, ...]:
+    return (diagnosis.verdict, *diagnosis.alternatives)
+
+
+def _write_separating_plan(args: argparse.Namespace, diagnosis: Diagnosis) -> Path:
+    plan = separating_plan(diagnosis.separating_poses, DEFAULT_SETTLE_S)
+    if args.separating_plan is not None:
+        return write_separating_plan(args.separating_plan, plan, _tied(diagnosis))
+    folder = args.report if args.report else Path(args.input).parent
+    # The default name takes the next free number instead of replacing an earlier plan.
+    path = create_numbered(folder / "separating-plan.toml", "plan file")
+    return write_separating_plan(path, plan, _tied(diagnosis), overwrite=True)
 
 
 def _diagnose(args: argparse.Namespace, profile, steps, choice: ModelChoice, candidates,
@@ -74,7 +107,7 @@ def _diagnose(args: argparse.Namespace, profile, steps, choice: ModelChoice, can
 
     try:
         return diagnose(steps, choice.model.name, choice.requested, candidates, samples=samples,
-                        settings=DiagnosisSettings(workers=args.workers), progress=say)
+                        settings=DiagnosisSettings(workers=args.workers, depth=args.depth), progress=say)
     except ConvergenceError as error:
         raise UserError(f"{args.input}: the baseline {choice.model.name} model cannot follow these data ({error}); "
                         "check --profile and the units of the jet forces") from None
@@ -93,7 +126,8 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
                          numbers=("before deg", "after deg", "explained", "score change", "online"),
                          caption="explained: share of the baseline's excess squared error over the floor it "
                                  "removes; score: BIC on the training residuals, change from the baseline (lower "
-                                 "is better); online: cosine of its signature with the online disturbance estimate")
+                                 "is better); online: cosine of its signature with the online disturbance estimate; "
+                                 "an unconverged fit is never ranked above a converged one")
     table.add_column("fitted parameters")
     for candidate in diagnosis.ranking:
         style = "bold green" if candidate.effect == diagnosis.verdict else ("" if candidate.qualifies else "dim")
@@ -103,6 +137,9 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
             continue
         fitted = ", ".join(f"{name.partition('.')[2]} {value:.4g} +- {error:.2g}"
                            for name, (value, error) in candidate.parameters.items())
+        if candidate.notes:
+            fitted += " [" + "; ".join(candidate.notes) + "]"
+            style = style if candidate.converged else "dim red"
         table.add_row(candidate.effect, f"{diagnosis.baseline_heldout_rmse_deg:.3f}",
                       f"{candidate.heldout_orientation_rmse_deg:.3f}", f"{candidate.explained_fraction:.0%}",
                       f"{candidate.score_change:+.1f}", f"{candidate.online_correlation:+.2f}", fitted, style=style)
@@ -119,11 +156,20 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
     elif diagnosis.verdict == UNEXPLAINED:
         title, style = "verdict: unexplained", "yellow"
     else:
-        title, style = f"verdict: {diagnosis.verdict}", "green"
+        title, style = "verdict: " + " + ".join(found.effect for found in diagnosis.found), "green"
     lines = [diagnosis.explanation, "", "Evidence: " + "; ".join(evidence) + "."]
-    if diagnosis.alternatives:
-        lines.append(f"Hard to tell apart from: {', '.join(diagnosis.alternatives)} (score within 10).")
-    if diagnosis.remaining_excess:
+    for found in diagnosis.found:
+        fitted = ", ".join(f"{name.partition('.')[2]} {value:.4g} +- {error:.2g}"
+                           for name, (value, error) in found.parameters.items())
+        notes = f" [{'; '.join(found.notes)}]" if found.notes else ""
+        lines.append(f"{found.effect}: {found.share_of_excess:.0%} of the excess, held-out error "
+                     f"{found.heldout_orientation_rmse_deg:.3f} deg with it ({fitted}){notes}")
+    for stage in (diagnosis, *diagnosis.stages):
+        if stage.alternatives:
+            lines.append(f"{stage.verdict} explains the held-out data no better than {', '.join(stage.alternatives)} "
+                         f"within noise (paired test at the {DiagnosisSettings().significance:.0%} level): see the separating plan.")
+    final = diagnosis.final
+    if final.remaining_excess:
         lines.append("Even with it the held-out error stays above the noise floor: something else is missing too.")
     console.print(Panel("\n".join(lines), title=title, border_style=style))
     console.print(_next_steps(diagnosis, args))
@@ -138,6 +184,7 @@ def _next_steps(diagnosis: Diagnosis, args: argparse.Namespace) -> str:
         return (f"Next: see where it fails with `calibrate {data}{options} -o p.toml` and `compare {data} --params "
                 "p.toml --online --report DIR`, write the missing physics as an effect file (see docs/examples/), "
                 f"and try it with `diagnose {data}{options} --candidate FILE.py:Class`.")
-    return (f"Next: `calibrate {data}{options} -o before.toml`, then `calibrate {data}{options} --effect "
-            f"{diagnosis.verdict} -o after.toml`, then `compare {data} --params after.toml --baseline before.toml "
+    found = "".join(f" --effect {effect.effect}" for effect in diagnosis.found)
+    return (f"Next: `calibrate {data}{options} -o before.toml`, then `calibrate {data}{options}{found} "
+            f"-o after.toml`, then `compare {data} --params after.toml --baseline before.toml "
             "--online` to watch the error fall.")

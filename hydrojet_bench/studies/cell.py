@@ -36,7 +36,8 @@ ROW_COLUMNS: dict[str, str] = {
     "alternatives": "string", "baseline_heldout_rmse_deg": "float64", "winner_heldout_rmse_deg": "float64",
     "noise_floor_deg": "float64", "fitted": "string", "fitted_value": "float64",
     "fitted_standard_error": "float64", "recovery_z": "float64", "converged": "bool", "seconds": "float64",
-    "error": "string",
+    "error": "string", "found": "string", "final_heldout_rmse_deg": "float64", "at_floor_threshold_deg": "float64",
+    "unconverged_fits": "int64", "bound_clipped": "bool", "right": "bool",
 }
 
 
@@ -57,6 +58,22 @@ def expected_verdict(cell: Cell) -> str | None:
         return NONE
     from_file = ":" in cell.effects[0]  # library effects go by name, others by path/to/file.py:Class
     return UNEXPLAINED if from_file else cell.truth
+
+
+def right_verdict(cell: Cell, diagnosis: Diagnosis) -> bool:
+    """Issue 12's "right": the hidden effect (every hidden one for a pair) named or
+    listed as an alternative; or "none" where the baseline's held-out error is at the
+    floor (the effect below detection); "unexplained" for an effect outside the library."""
+    named = {found.effect for found in diagnosis.found}
+    named |= {alternative for stage in (diagnosis, *diagnosis.stages) for alternative in stage.alternatives}
+    if diagnosis.verdict == NONE:
+        return diagnosis.baseline_heldout_rmse_deg <= diagnosis.at_floor_threshold_deg
+    expected = expected_verdict(cell)
+    if expected is None:
+        return set(cell.truth.split("+")) <= named
+    if expected == UNEXPLAINED:
+        return diagnosis.verdict == UNEXPLAINED
+    return expected in named
 
 
 def cell_row(cell: Cell, error: str | None = None) -> dict:
@@ -117,9 +134,21 @@ def _diagnosis_columns(cell: Cell, diagnosis: Diagnosis) -> dict:
         "fitted": json.dumps({c.effect: {name: [value, error] for name, (value, error) in c.parameters.items()}
                               for c in diagnosis.ranking if c.error is None}),
         "converged": all(c.error is None for c in diagnosis.ranking),
+        "found": ",".join(found.effect for found in diagnosis.found),
+        "final_heldout_rmse_deg": diagnosis.found[-1].heldout_orientation_rmse_deg if diagnosis.found else None,
+        "at_floor_threshold_deg": diagnosis.at_floor_threshold_deg,
+        "unconverged_fits": sum(not c.converged for stage in (diagnosis, *diagnosis.stages) for c in stage.ranking)
+                            + (not diagnosis.baseline.converged),
+        "bound_clipped": any(found.notes for found in diagnosis.found),
+        "right": right_verdict(cell, diagnosis),
     }
     if cell.kind == "sweep":
-        own = next((c for c in diagnosis.ranking if c.effect == cell.truth and c.error is None), None)
+        # The fit of the hidden effect where the diagnosis named it (possibly at a later
+        # stage, on top of another), else its first-stage fit.
+        stages = (diagnosis, *diagnosis.stages)
+        own = next((c for stage in stages if stage.verdict == cell.truth for c in stage.ranking
+                    if c.effect == cell.truth), None)
+        own = own or next((c for c in diagnosis.ranking if c.effect == cell.truth and c.error is None), None)
         if own is not None and cell.parameter in own.parameters:
             value, error = own.parameters[cell.parameter]
             columns.update(fitted_value=value, fitted_standard_error=error,

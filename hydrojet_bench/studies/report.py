@@ -6,7 +6,9 @@
   log x when the sizes span a decade or more; the smallest size detected in at least
   `POWER_LEVEL` of the cells is the protocol's detection limit;
 * parameter recovery: fitted minus true over the fit's standard error (a z score) of the
-  swept parameter, per effect, when the diagnosis fitted it;
+  swept parameter, per effect, when the diagnosis fitted it; the recovery table gives,
+  per effect, the share of cells where the effect was detected whose true value lies
+  within 2 standard errors (`COVERAGE_Z`), the coverage honest errors give ~95 %;
 * plans side by side: the share of right verdicts per hidden truth and plan.
 """
 
@@ -26,6 +28,7 @@ from ..analysis.report import _save  # noqa: E402
 from ..errors import UserError  # noqa: E402
 
 POWER_LEVEL = 0.9
+COVERAGE_Z = 2.0
 # Sizes spanning this ratio or more are plotted on a log axis.
 LOG_SPAN = 10.0
 SETTING = ["plan", "model", "orientation"]
@@ -71,6 +74,16 @@ def detection_limits(sweeps: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(limits, columns=["truth", "parameter", *SETTING, "smallest_detected", "sizes", "cells"])
 
 
+def recovery_table(sweeps: pd.DataFrame) -> pd.DataFrame:
+    """Per swept parameter, over the cells where its effect was detected and fitted: the
+    share whose true value lies within `COVERAGE_Z` standard errors, the median z and
+    the count."""
+    detected = sweeps[sweeps["detected"] & sweeps["recovery_z"].notna()]
+    return (detected.groupby("parameter")["recovery_z"]
+            .agg(coverage_2se=lambda z: float((z.abs() <= COVERAGE_Z).mean()), median_z="median", cells="count")
+            .reset_index())
+
+
 def _smallest(sizes: pd.Series, default: float) -> float:
     """The size closest to the parameter's default (its "no effect" value)."""
     if sizes.empty:
@@ -87,7 +100,10 @@ def summary_markdown(rows: pd.DataFrame) -> str:
              f"(one worker's time).", ""]
     if len(finished):
         right = finished[finished["kind"] != "pair"]["detected"].mean()
-        lines += [f"Right verdicts (single effects and none): {right:.0%}.", "",
+        lines += [f"Right verdicts (single effects and none): {right:.0%}.", ""]
+        if "right" in finished and finished["right"].notna().any():
+            lines += [_issue_figures(finished), ""]
+        lines += [
                   "## Confusion matrix (cells; rows: hidden truth, columns: verdict)", "",
                   _markdown(confusion_table(finished).reset_index()), ""]
         sweeps = finished[finished["kind"] == "sweep"]
@@ -100,12 +116,34 @@ def summary_markdown(rows: pd.DataFrame) -> str:
                 stats = recovered.groupby("parameter")["recovery_z"].agg(
                     median="median", within_2=lambda z: float((z.abs() <= 2).mean()), cells="count").reset_index()
                 lines += ["## Parameter recovery ((fitted - true) / standard error)", "", _markdown(stats), ""]
+                table = recovery_table(sweeps)
+                if len(table):
+                    covered = (sweeps["detected"] & (sweeps["recovery_z"].abs() <= COVERAGE_Z)).sum()
+                    fitted = (sweeps["detected"] & sweeps["recovery_z"].notna()).sum()
+                    lines += [f"## Recovery table: where the effect was detected, the true value within "
+                              f"{COVERAGE_Z:g} standard errors ({covered} of {fitted} cells, "
+                              f"{covered / fitted:.0%})", "", _markdown(table), ""]
         by_plan = finished[finished["kind"] != "pair"].pivot_table(index="truth", columns="plan", values="detected",
                                                                   aggfunc="mean")
         lines += ["## Plans side by side (share of right verdicts)", "", _markdown(by_plan.reset_index()), ""]
     if len(failed):
         lines += ["## Failed cells", "", _markdown(failed[["scenario", "seed", "plan", "model", "error"]]), ""]
     return "\n".join(lines)
+
+
+def _issue_figures(finished: pd.DataFrame) -> str:
+    """Issue 12's figures: right verdicts (the hidden effect named or an alternative,
+    every one of a pair, "none" at the floor), the named effects' held-out error over
+    the floor, fits left unconverged or on a bound."""
+    right = finished["right"].astype(bool)
+    named = finished[finished["final_heldout_rmse_deg"].notna()]
+    ratio = named["final_heldout_rmse_deg"] / named["noise_floor_deg"]
+    return (f"Right verdicts (issue 12: the hidden effect named or listed as an alternative, every effect of a "
+            f"pair, none at the floor): {int(right.sum())} of {len(finished)} ({right.mean():.0%}). Held-out error "
+            f"with the named effect(s) over the noise floor: median {ratio.median():.2f}, "
+            f"{int((ratio <= 1.2).sum())} of {len(ratio)} cells within 1.2x. Fits left unconverged: "
+            f"{int(finished['unconverged_fits'].sum())} (in {int((finished['unconverged_fits'] > 0).sum())} cells); "
+            f"named effects on a bound: {int(finished['bound_clipped'].astype(bool).sum())} cells.")
 
 
 def _markdown(table: pd.DataFrame) -> str:

@@ -198,9 +198,10 @@ class TwinConfig:
                                  f"effects; known: {', '.join(sorted(known)) or 'none'}")
             number = _number(owner, f"hidden_effect_values[{key!r}]", value)
             parameter = known[key]
-            if not parameter.lower <= number <= parameter.upper:
-                raise ValueError(f"{owner}.hidden_effect_values[{key!r}] = {number} is outside "
-                                 f"[{parameter.lower}, {parameter.upper}] {parameter.unit}")
+            lower, upper = parameter.limits
+            if not lower <= number <= upper:
+                raise ValueError(f"{owner}.hidden_effect_values[{key!r}] = {number} is outside its physical "
+                                 f"limits [{lower}, {upper}] {parameter.unit}")
             checked.append((key, number))
         object.__setattr__(self, "hidden_effect_values", tuple(sorted(checked)))
         if not isinstance(self.noise, SensorNoise):

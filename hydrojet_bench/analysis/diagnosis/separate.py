@@ -87,8 +87,8 @@ def write_separating_plan(path: Path, plan: Plan, candidates: Sequence[str], *, 
              "# the new session.", ""]
     for step in plan:
         q1, q2, q3 = step.jet_forces_n
-        lines += ["[[step]]", f"q1 = {q1:.6g}", f"q2 = {q2:.6g}", f"q3 = {q3:.6g}", f"sweep = {step.sweep}",
-                  f"step = {step.step}", f"settle_s = {step.settle_s:g}", ""]
+        lines += ["[[step]]", f"q1 = {q1!r}", f"q2 = {q2!r}", f"q3 = {q3!r}", f"sweep = {step.sweep}",
+                  f"step = {step.step}", f"settle_s = {step.settle_s!r}", ""]
     text = "\n".join(lines)
 
     def write(partial: Path) -> Path:
