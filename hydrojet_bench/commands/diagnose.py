@@ -75,10 +75,14 @@ def run(args: argparse.Namespace) -> int:
 
         for path in write_diagnosis_report(args.report, diagnosis):
             console.print(f"wrote {render.plain(path)}")
-    if diagnosis.separating_poses:
-        path = _write_separating_plan(args, diagnosis)
-        console.print(f"wrote {render.plain(path)}: the poses that tell {', '.join(_tied(diagnosis))} apart; "
+    tied = next((stage for stage in (diagnosis, *diagnosis.stages) if stage.alternatives), None)
+    if tied is not None and tied.separating_poses:
+        path = _write_separating_plan(args, tied)
+        console.print(f"wrote {render.plain(path)}: the poses that tell {', '.join(_tied(tied))} apart; "
                       f"run it with `run --plan {render.plain(path)}` and diagnose the new session")
+    elif tied is not None:
+        console.print(f"No command within the jets' range makes {', '.join(_tied(tied))} differ by more than "
+                      "the noise floor: they are equivalent on this rig, so no separating plan is written.")
     return 0
 
 

@@ -58,6 +58,9 @@ def test_user_mistakes_give_one_clear_line_and_exit_code_2(recorded, tmp_path, c
         (["--candidate", f"{tmp_path / 'nowhere.py'}:Effect"], "nowhere.py does not exist"),
         (["--workers", "0"], "--workers must be at least 1"),
         (["--effect", "jet_gain", "--candidate", "jet_gain"], "already a known effect"),
+        (["--depth", "0"], "--depth must be at least 1"),
+        (["--separating-plan", str(recorded)], "already exists"),
+        (["--separating-plan", str(tmp_path / "no" / "plan.toml")], "does not exist"),
     ):
         # main() turns a UserError into one line on stderr and exit code 2; anything else
         # would propagate and fail the test.
@@ -66,3 +69,26 @@ def test_user_mistakes_give_one_clear_line_and_exit_code_2(recorded, tmp_path, c
         assert message in error, error
     assert main(["diagnose", str(tmp_path / "missing.csv")]) == 2
     assert "missing.csv" in capsys.readouterr().err
+
+
+def test_the_separating_plan_goes_beside_the_report_and_never_over_an_earlier_one(tmp_path):
+    from types import SimpleNamespace
+
+    from hydrojet_bench.analysis.diagnosis.separate import SeparatingPose
+    from hydrojet_bench.bench.plan_choice import choose_plan
+    from hydrojet_bench.commands.diagnose import _write_separating_plan
+
+    diagnosis = SimpleNamespace(verdict="jet_gain", alternatives=("jet_misalignment",),
+                                separating_poses=(SeparatingPose((0.15, 0.0, 0.0), 2.0),
+                                                  SeparatingPose((0.0, 0.1, 0.05), 1.0)))
+    args = SimpleNamespace(separating_plan=None, report=tmp_path / "report", input=tmp_path / "data.csv")
+    (tmp_path / "report").mkdir()
+    first = _write_separating_plan(args, diagnosis)
+    second = _write_separating_plan(args, diagnosis)
+    assert first == tmp_path / "report" / "separating-plan.toml"
+    assert second == tmp_path / "report" / "separating-plan-1.toml"
+    plan = choose_plan(str(first))
+    assert len(plan) == 6 and plan[0].jet_forces_n == (0.15, 0.0, 0.0) and sorted(set(plan.sweeps)) == [0, 1, 2]
+    beside_input = _write_separating_plan(SimpleNamespace(separating_plan=None, report=None,
+                                                          input=tmp_path / "data.csv"), diagnosis)
+    assert beside_input == tmp_path / "separating-plan.toml"

@@ -473,7 +473,8 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
         ranking=ranking, alternatives=alternatives, remaining_excess=remaining, online=online,
         signatures_deg=signatures, baseline_residual_deg=np.degrees(residual), held_out_rows=np.flatnonzero(held_out),
         held_out_sweep=steps.sweep[held_out], elapsed_s=time.perf_counter() - started,
-        separating_poses=_separating(problem, candidates, fits, (verdict, *alternatives)) if alternatives else (),
+        separating_poses=(_separating(problem, candidates, fits, (verdict, *alternatives), floor)
+                          if alternatives else ()),
         candidate_fits={candidate.name: result for candidate, result in zip(candidates, fits)})
 
 
@@ -488,16 +489,16 @@ def _significantly_worse(errors_deg: np.ndarray, best_errors_deg: np.ndarray, si
     return statistic > float(t_distribution.ppf(1.0 - significance, len(difference) - 1))
 
 
-def _separating(problem: Problem, candidates: Sequence[Effect], fits: Sequence[Fit],
-                names: Sequence[str]) -> tuple[SeparatingPose, ...]:
-    """Where the tied candidates' calibrated models differ most."""
+def _separating(problem: Problem, candidates: Sequence[Effect], fits: Sequence[Fit], names: Sequence[str],
+                floor_deg: float) -> tuple[SeparatingPose, ...]:
+    """Where the tied candidates' calibrated models differ most, by more than the floor."""
     models = []
     for candidate, result in zip(candidates, fits):
         if candidate.name in names and result.params is not None:
             effect = at_physical_limits(candidate) if result.widened else candidate
             models.append((candidate.name, problem.model(effect), result.params))
     return separating_poses(models, problem.steps.profile.max_jet_force_n,
-                            problem.gravity_in_base_m_s2.mean(axis=0))
+                            problem.gravity_in_base_m_s2.mean(axis=0), floor_deg)
 
 
 def _number(value: float) -> float | None:

@@ -5,8 +5,10 @@ Candidate commands: every combination of the three jets at 0, 1/3, 2/3 and all o
 jet's largest force (63 commands, the zero command left out). Each tied model predicts
 the tip sensor's orientation there (a static solve from rest, under the session's mean
 gravity); a command separates the candidates by the smallest angle between any two of
-their predictions, so a pose is only proposed when it splits every pair. The best
-`POSES` commands make the plan, each swept `REPETITIONS` times (so `diagnose` on the
+their predictions, so a pose is only proposed when it splits every pair, and only
+when that angle exceeds the noise floor of one step (candidates no pose separates by
+more are equivalent for this rig: no plan is proposed). The best `POSES` commands make
+the plan, each swept `REPETITIONS` times (so `diagnose` on the
 new session can hold repetitions out and measure its own noise floor).
 """
 
@@ -45,9 +47,10 @@ class SeparatingPose:
 
 def separating_poses(models: Sequence[tuple[str, ShootingModel, ModelParameters]],
                      max_force_per_jet_n: Sequence[float], gravity_in_base_m_s2: np.ndarray,
-                     count: int = POSES) -> tuple[SeparatingPose, ...]:
-    """The ``count`` commands that best separate the named calibrated models (see the
-    module docstring); empty for fewer than two models."""
+                     min_separation_deg: float = 0.0, count: int = POSES) -> tuple[SeparatingPose, ...]:
+    """The ``count`` commands that best separate the named calibrated models by more
+    than ``min_separation_deg`` (see the module docstring); empty for fewer than two
+    models."""
     if len(models) < 2:
         return ()
     limits = np.asarray(max_force_per_jet_n, dtype=float)
@@ -70,7 +73,7 @@ def separating_poses(models: Sequence[tuple[str, ShootingModel, ModelParameters]
     separation = np.where(np.isfinite(separation), separation, -np.inf)
     best = np.argsort(-separation)[:count]
     return tuple(SeparatingPose(tuple(float(f) for f in commands[index]), float(separation[index]))
-                 for index in best if separation[index] > 0.0)
+                 for index in best if separation[index] > min_separation_deg)
 
 
 def separating_plan(poses: Sequence[SeparatingPose], settle_s: float) -> Plan:
