@@ -37,6 +37,15 @@ def steps_with(hidden: dict[str, float], profile=PROFILE, seed: int = 5):
     return twin.run_plan(PLAN).to_dataset(profile, f"twin seed {seed}").quasistatic_steps()
 
 
+PLAY = {"base_hysteresis.compliance_rad_per_nm": 20.0, "base_hysteresis.play_rad": 0.05}
+
+
+@pytest.fixture(scope="module")
+def play_steps():
+    """A clamp with play at the old search bound of play_rad, shared by two tests."""
+    return steps_with(PLAY)
+
+
 def candidates(*names: str):
     return tuple(load_effect(name) for name in names)
 
@@ -85,20 +94,16 @@ def test_strain_stiffening_three_times_the_search_bound_is_refitted_to_the_physi
     assert_recovered(diagnosis, hidden)
 
 
-def test_clamp_play_at_the_old_bound_is_not_clipped_there():
-    hidden = {"base_hysteresis.compliance_rad_per_nm": 20.0, "base_hysteresis.play_rad": 0.05}
-    diagnosis = diagnose(steps_with(hidden), "cosserat", candidates=candidates("base_hysteresis", "base_compliance"))
+def test_clamp_play_at_the_old_bound_is_not_clipped_there(play_steps):
+    diagnosis = diagnose(play_steps, "cosserat", candidates=candidates("base_hysteresis", "base_compliance"))
     assert diagnosis.verdict == "base_hysteresis" and diagnosis.winner.widened
-    assert_recovered(diagnosis, hidden)
+    assert_recovered(diagnosis, PLAY)
 
 
-def test_a_fit_on_a_bound_is_flagged_in_the_table_json_and_verdict(monkeypatch):
-    # The physical limit itself: nothing wider to refit with.
-    hidden = {"base_hysteresis.compliance_rad_per_nm": 20.0, "base_hysteresis.play_rad": 0.05}
-    steps = steps_with(hidden)
-    narrow = load_effect("base_hysteresis")
+def test_a_fit_on_a_bound_is_flagged_in_the_table_json_and_verdict(play_steps, monkeypatch):
+    # As if the old bound were the physical limit: nothing wider to refit with.
     monkeypatch.setattr(fitting, "at_physical_limits", lambda effect: effect)
-    diagnosis = diagnose(steps, "cosserat", candidates=(narrow,))
+    diagnosis = diagnose(play_steps, "cosserat", candidates=candidates("base_hysteresis"))
     winner = diagnosis.winner
     assert winner.at_bound == ("base_hysteresis.play_rad",) and not winner.widened
     assert "play_rad at its bound: may be larger" in winner.notes

@@ -33,10 +33,11 @@ residuals many times the noise, and with them finite-difference noise in its gra
 that no further step removes; a fit that ran out of evaluations first is
 continued once with a larger budget and otherwise reported unconverged. The cost is
 not convex in every effect's parameters (a mounting about the wrong axis, a gain on
-the wrong side of E's trade-off), so before fitting a candidate a coarse scan of its
-own parameters, the baseline's held fixed (a grid for one or two parameters, a step
-either way along each axis for more), looks for a better basin; when one is found the
-candidate is fitted from there too and the better fit kept.
+the wrong side of E's trade-off), so after fitting a candidate from the baseline a
+coarse scan of its own parameters, the baseline's held fixed (a grid for one or two
+parameters, a step either way along each axis for more), looks for a better basin: a
+scan point whose chi^2 beats that fit's (with every parameter free) lies in another
+basin, and the candidate is fitted from there too, the better fit kept.
 
 Bounds: a fit that ends on a search bound of its effect (one that is not the
 parameter's no-effect default) is refitted with the bounds widened to the physical
@@ -89,7 +90,7 @@ COST_TOLERANCE = 1e-9
 BOUND_SHARE = 1e-3
 # The coarse scan: grid points per parameter for one- and two-parameter effects, and
 # the step along each axis (share of the bounds' span) for more.
-SCAN_POINTS = {1: 9, 2: 5}
+SCAN_POINTS = {1: 5, 2: 3}
 SCAN_AXIS_SHARE = 0.25
 # A base that tilts less than this over a session is clamped (tracker noise is ~0.7 deg
 # per sample, ~0.1 deg per averaged step).
@@ -271,8 +272,9 @@ def fit_candidate(problem: Problem, candidate: Effect, baseline: ModelParameters
     too (the better fit is kept); then, if it ends on a search bound, again with the
     bounds widened to the physical limits (see the module docstring)."""
     max_evaluations = max_evaluations or CANDIDATE_MAX_EVALUATIONS
-    starts = [baseline] + scan_starts(problem, candidate, baseline)
-    fits = [fit(problem, candidate, start, max_evaluations) for start in starts]
+    fits = [fit(problem, candidate, baseline, max_evaluations)]
+    starts = scan_starts(problem, candidate, baseline, fits[0].training_chi2)
+    fits += [fit(problem, candidate, start, max_evaluations) for start in starts]
     best = min(fits, key=_preference)
     if best.error is None and best.at_bound:
         widened_effect = at_physical_limits(candidate)
@@ -282,7 +284,7 @@ def fit_candidate(problem: Problem, candidate: Effect, baseline: ModelParameters
             # the widened one failed, or neither converged nor improved on it.
             if wider.error is None and (wider.converged or wider.training_chi2 <= best.training_chi2):
                 best = replace(wider, widened=True)
-    return replace(best, starts=len(starts), evaluations=sum(f.evaluations for f in fits)
+    return replace(best, starts=len(fits), evaluations=sum(f.evaluations for f in fits)
                    + (best.evaluations if best.widened else 0))
 
 
@@ -291,10 +293,11 @@ def _preference(result: Fit) -> tuple[bool, float]:
     return (not result.converged, result.training_chi2)
 
 
-def scan_starts(problem: Problem, candidate: Effect, baseline: ModelParameters) -> list[ModelParameters]:
+def scan_starts(problem: Problem, candidate: Effect, baseline: ModelParameters,
+                fitted_chi2: float) -> list[ModelParameters]:
     """The best point of a coarse scan of the candidate's own parameters (the
-    baseline's held fixed) as a second start, when it beats the defaults' chi^2 by more
-    than one; else none."""
+    baseline's held fixed) as another start, when its chi^2 beats ``fitted_chi2`` (the
+    fit from the defaults) by more than one; else none."""
     parameters = candidate.parameters
     names = qualified_parameter_names(candidate)
     if len(parameters) in SCAN_POINTS:
@@ -308,8 +311,7 @@ def scan_starts(problem: Problem, candidate: Effect, baseline: ModelParameters) 
                        if parameter.lower <= value <= parameter.upper]
     defaults = {name: p.default for name, p in zip(names, parameters)}
     model = problem.model(candidate)
-    reference = training_cost(problem, model, with_parameters(baseline, defaults))
-    best, best_cost = None, reference - 1.0
+    best, best_cost = None, fitted_chi2 - 1.0
     for point in points:
         trial = with_parameters(baseline, {**defaults, **point})
         cost = training_cost(problem, model, trial)
