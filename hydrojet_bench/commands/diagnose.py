@@ -10,21 +10,29 @@ and names the effect that explains the excess error, if one does
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from pathlib import Path
+
+import numpy as np
 
 from rich.console import Console
 from rich.panel import Panel
 
 from ..analysis.diagnosis import NONE, UNEXPLAINED, Diagnosis, DiagnosisSettings, diagnose
+from ..analysis.diagnosis.engine import default_candidates
 from ..analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
 from ..analysis.diagnosis.noise import repeatability_floor
 from ..inputs import load_dataset
-from ..effects import load_effect
+from ..effects import CALIBRATION_POSES, Effect, load_effect
 from ..errors import ConvergenceError, UserError
+from ..estimation.calibration import rows_that_identify
+from ..files import check_writable_target, publish
 from ..model_choice import COSSERAT, ModelChoice, model_choice
+from ..params_io import ParameterFile, effect_specs, write_parameter_file
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
 from .log_notice import warn_if_incomplete
+from .next_steps import command, effect_words, input_words, print_next
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -38,6 +46,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="processes for the candidate fits (default: up to 2)")
     render.add_json_argument(parser, "the diagnosis")
     parser.add_argument("--report", type=Path, metavar="DIR", help="write figures (PNG) to this folder")
+    parser.add_argument("--export", type=Path, metavar="PARAMS",
+                        help="write the verdict's calibrated parameters (the model with the named effect, fitted as "
+                             "scored; the baseline's when none is named) as a parameter file (a new file)")
     parser.epilog = ("--effect names effects known to be present: they join the baseline (gravity at its nominal "
                      "weight, E0, EL, L, w_d) and are calibrated with it. Every --candidate is then tried on top.")
     parser.set_defaults(func=run)
@@ -48,11 +59,17 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
     choice = model_choice(args)  # validates --effect before the data is read
     candidates = tuple(load_effect(spec) for spec in dict.fromkeys(args.candidate)) or None
+    if args.export is not None:
+        check_writable_target(args.export, "parameter file", overwrite=False)  # before the minutes of fitting
     profile, steps = load_steps(args.input, args.profile)
     log_damage = warn_if_incomplete(args.input)
     console = render.console_for(args)
     diagnosis = _diagnose(args, profile, steps, choice, candidates, Console(stderr=True))
     print_diagnosis(console, diagnosis, args)
+    if args.export is not None:
+        write_export(args.export, diagnosis, choice, candidates or default_candidates(choice.requested), args, profile)
+        console.print(f"wrote {render.plain(args.export)}")
+    print_next_steps(console, diagnosis, args, choice, candidates or default_candidates(choice.requested))
     if args.json:
         render.write_json(args.json, {"data": str(args.input), **diagnosis.as_dict(), "log_damage": log_damage})
     if args.report:
@@ -126,18 +143,65 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
     if diagnosis.remaining_excess:
         lines.append("Even with it the held-out error stays above the noise floor: something else is missing too.")
     console.print(Panel("\n".join(lines), title=title, border_style=style))
-    console.print(_next_steps(diagnosis, args))
 
 
-def _next_steps(diagnosis: Diagnosis, args: argparse.Namespace) -> str:
-    data = str(args.input) + (f" --profile {args.profile}" if args.profile else "")
-    options = f" --model {diagnosis.model}" + "".join(f" --effect {spec}" for spec in args.effect)
-    if diagnosis.verdict == NONE:
-        return f"Next: the model is complete for these data; calibrate it with `calibrate {data}{options} -o p.toml`."
-    if diagnosis.verdict == UNEXPLAINED:
-        return (f"Next: see where it fails with `calibrate {data}{options} -o p.toml` and `compare {data} --params "
-                "p.toml --online --report DIR`, write the missing physics as an effect file (see docs/examples/), "
-                f"and try it with `diagnose {data}{options} --candidate FILE.py:Class`.")
-    return (f"Next: `calibrate {data}{options} -o before.toml`, then `calibrate {data}{options} --effect "
-            f"{diagnosis.verdict} -o after.toml`, then `compare {data} --params after.toml --baseline before.toml "
-            "--online` to watch the error fall.")
+def _verdict_effect(diagnosis: Diagnosis, candidates: Sequence[Effect]) -> Effect | None:
+    return next((effect for effect in candidates if effect.name == diagnosis.verdict), None)
+
+
+def write_export(path: Path, diagnosis: Diagnosis, choice: ModelChoice, candidates: Sequence[Effect],
+                 args: argparse.Namespace, profile) -> None:
+    """The verdict's model and calibrated parameters as a parameter file (`params_io`):
+    the winner's fit when an effect is named, else the baseline's; effects from files are
+    written relative to ``path``."""
+    winner, effect = diagnosis.winner, _verdict_effect(diagnosis, candidates)
+    if winner is not None and effect is not None:
+        fitted, heldout = winner.calibrated, winner.heldout_orientation_rmse_deg
+    else:
+        baseline = diagnosis.baseline
+        fitted = {name: (float(value), float(error))
+                  for name, value, error in zip(baseline.names, baseline.values, baseline.standard_errors)}
+        heldout, effect = diagnosis.baseline_heldout_rmse_deg, None
+    effects = [*([] if any(e.name == "gravity" for e in choice.requested) else [load_effect("gravity")]),
+               *choice.requested]
+    if effect is not None and all(e.name != effect.name for e in effects):
+        effects.append(effect)
+    content = ParameterFile(
+        model=diagnosis.model, effects=effect_specs(effects, path.parent),
+        parameters={name: value for name, (value, _) in fitted.items()},
+        standard_errors={name: error for name, (_, error) in fitted.items() if np.isfinite(error)},
+        calibration={"data": str(args.input), "profile": profile.source, "fit_on": "diagnose",
+                     "rows": diagnosis.split.description, "verdict": diagnosis.verdict,
+                     "heldout_orientation_rmse_deg": round(heldout, 4),
+                     "noise_floor_deg": round(diagnosis.noise_floor_deg, 4)})
+    publish(path, "parameter file", lambda partial: write_parameter_file(partial, content))
+
+
+def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Namespace, choice: ModelChoice,
+                     candidates: Sequence[Effect]) -> None:
+    """What to run next, as commands that run as printed (one per line, never wrapped)."""
+    data = input_words(args)
+    known = ("--model", diagnosis.model, *effect_words(args.effect))
+    effect = _verdict_effect(diagnosis, candidates)
+    if effect is None:
+        calibrate = command("calibrate", *data, *known, "-o", "p.toml")
+        if diagnosis.verdict == NONE:
+            print_next(console, "the model is complete for these data; calibrate it with", [calibrate])
+            return
+        print_next(console, "see where it fails with", [
+            calibrate, command("compare", *data, "--params", "p.toml", "--online", "--report", "report"),
+            "then write the missing physics as an effect file (see docs/examples/) and try it with "
+            "diagnose --candidate path/to/file.py:Class."])
+        return
+    spec = next((s for s in args.candidate if ":" in s and load_effect(s).name == effect.name), effect.name)
+    # Both calibrations fit the rows the verdict needs, so that compare shows what was promised.
+    rows = rows_that_identify((*choice.requested, effect))
+    fit_on = ("--fit-on", rows) if rows != CALIBRATION_POSES else ()
+    lines = [command("calibrate", *data, *known, *fit_on, "-o", "before.toml")]
+    if args.export is None:
+        lines.append(command("calibrate", *data, *known, *fit_on, "--effect", spec, "-o", "after.toml"))
+    lines.append(command("compare", *data, "--params", args.export or "after.toml", "--baseline", "before.toml",
+                         "--online"))
+    print_next(console, f"with {effect.name} the held-out error should fall from "
+               f"{diagnosis.baseline_heldout_rmse_deg:.3f} deg to about "
+               f"{diagnosis.winner.heldout_orientation_rmse_deg:.3f} deg; watch it with", lines)

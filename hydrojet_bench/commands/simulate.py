@@ -21,6 +21,7 @@ from ..profile import load_profile
 from ..twin import DigitalTwin, TwinConfig
 from ..twin.hidden import HIDDEN, inert_effects, parse_hidden
 from .common import check_seed
+from .next_steps import command, print_next
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -67,6 +68,10 @@ def run(args: argparse.Namespace) -> int:
     dataset = recording.to_dataset(profile, f"twin seed {config.seed}")
     rows = publish(args.output, "recording", lambda partial: write_csv(dataset, partial), overwrite=args.overwrite)
     hidden_names = ", ".join(effect.name for effect in hidden) or "none"
-    Console().print(f"wrote {rows} samples (229 steps: 40 calibration poses, 9 sweeps) to {args.output}; "
-                    f"hidden effects: {hidden_names}", markup=False)
+    console = Console()
+    console.print(f"wrote {rows} samples (229 steps: 40 calibration poses, 9 sweeps) to {args.output}; "
+                  f"hidden effects: {hidden_names}", markup=False)
+    # A CSV file is read with the "sim" profile unless told otherwise.
+    profile_words = () if args.profile == "sim" else ("--profile", args.profile)
+    print_next(console, "which effect is hidden? Ask with", [command("diagnose", args.output, *profile_words)])
     return 0

@@ -10,14 +10,16 @@ each into a `UserError` naming the file and the class.
 from __future__ import annotations
 
 import inspect
+import os
 from collections.abc import Mapping
 from dataclasses import fields
+from pathlib import Path
 
 import numpy as np
 
 from ..errors import UserError
 from ..params import ModelParameters
-from .base import Effect, EffectParameter, effect_values
+from .base import CALIBRATION_POSES, SWEEPS, Effect, EffectParameter, effect_values, identifying_rows
 from .problem import RodProblem
 
 # Sample points of the trial problem an effect is applied to when it is loaded.
@@ -31,10 +33,13 @@ class CheckedEffect:
     def __init__(self, effect: Effect, origin: str) -> None:
         self.effect = effect
         self.origin = origin
+        path, _, self.class_name = origin.rpartition(":")
+        self.file = Path(path).resolve()
         self.name: str = effect.name
         self.explanation: str = effect.explanation
         self.parameters: tuple[EffectParameter, ...] = tuple(effect.parameters)
         self.uses_actuation: bool = effect.uses_actuation
+        self.identified_by: str = identifying_rows(effect)
 
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         try:
@@ -46,6 +51,11 @@ class CheckedEffect:
             if isinstance(value, (float, np.ndarray)) and not np.all(np.isfinite(value)):
                 raise UserError(f"effect {self.origin}: apply left a non-finite value (NaN or inf) in "
                                 f"problem.{item.name}")
+
+    def spec_from(self, folder: Path) -> str:
+        """This effect as ``path/to/file.py:ClassName`` with the path relative to ``folder``
+        (where a parameter file that names it lives), so that both can move together."""
+        return f"{Path(os.path.relpath(self.file, Path(folder).resolve())).as_posix()}:{self.class_name}"
 
     def __repr__(self) -> str:
         return f"{self.origin} ({self.name})"
@@ -72,6 +82,9 @@ def checked_effect(effect: object, origin: str, reserved_names: Mapping[str, obj
         raise UserError(f"effect {origin}: two parameters share a name")
     if not isinstance(effect.uses_actuation, bool):  # type: ignore[attr-defined]
         raise UserError(f"effect {origin}: uses_actuation must be True or False")
+    if identifying_rows(effect) not in (CALIBRATION_POSES, SWEEPS):  # type: ignore[arg-type]
+        raise UserError(f"effect {origin}: identified_by must be {CALIBRATION_POSES!r} or {SWEEPS!r}, "
+                        f"got {effect.identified_by!r}")  # type: ignore[attr-defined]
     apply = effect.apply  # type: ignore[attr-defined]
     try:
         inspect.signature(apply).bind(None, {})

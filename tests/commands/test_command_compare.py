@@ -4,6 +4,7 @@ recording whose jet 2 is clogged (the documented example effect)."""
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -88,11 +89,22 @@ def test_without_baseline_the_figures_keep_their_keys(calibrated, capsys):
     assert json.loads(printed.out) == figures and "RMS errors" in printed.err
 
 
-def test_a_file_effect_named_in_parameters_needs_its_file(calibrated, capsys):
+def test_a_parameter_file_carries_its_file_effect_relative_to_itself(calibrated, capsys, tmp_path):
     folder, data, before, after = calibrated
+    text = after.read_text()
+    relative = Path(os.path.relpath(CLOGGED_JET.rpartition(":")[0], folder)).as_posix()
+    assert f'effects = ["gravity", "{relative}:CloggedJet"]' in text
     capsys.readouterr()
-    assert main(["compare", str(data), "--params", str(after)]) == 2
+    out = tmp_path / "after.json"
+    assert main(["compare", str(data), "--params", str(after), "--json", str(out)]) == 0  # no --effect needed
+    assert json.loads(out.read_text())["parameters"]["effects"] == ["gravity", "clogged_jet"]
+    capsys.readouterr()
+    # Moved elsewhere, the file no longer finds its effect: one line naming both files.
+    moved = tmp_path / "deeper" / "after.toml"
+    moved.parent.mkdir()
+    moved.write_text(text)
+    assert main(["compare", str(data), "--params", str(moved)]) == 2
     message = capsys.readouterr().err
-    assert str(after) in message and "'clogged_jet'" in message and "--effect" in message
+    assert str(moved) in message and "clogged_jet.py does not exist" in message
     assert main(["compare", str(data), "--params", str(after), "--baseline", str(folder / "none.toml")]) == 2
     assert "no such parameter file" in capsys.readouterr().err

@@ -97,6 +97,8 @@ class CandidateResult:
     online_correlation: float
     evaluations: int
     error: str | None = None
+    # Every fitted parameter (the baseline's too): what `diagnose --export` writes.
+    calibrated: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         return {
@@ -290,7 +292,9 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
             rmse_by_jet_deg=rmse_by_jet(held, held_steps), hysteresis_gap_deg=hysteresis_gap_deg(held, held_steps),
             residual_correlation=cosine(signature, residual),
             online_correlation=cosine(online.equivalent_moment_nm(signature), online.missing_moment_nm),
-            evaluations=result.evaluations))
+            evaluations=result.evaluations,
+            calibrated={name: (float(value), float(error))
+                        for name, value, error in zip(result.names, result.values, result.standard_errors)}))
     ranking = tuple(sorted(results, key=lambda c: (c.error is not None, not c.qualifies, c.score)))
     qualifying = [c for c in ranking if c.qualifies]
     alternatives: tuple[str, ...] = ()
