@@ -23,9 +23,9 @@ from ..analysis.diagnosis.engine import default_candidates
 from ..analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
 from ..analysis.diagnosis.noise import repeatability_floor
 from ..inputs import load_dataset
-from ..effects import CALIBRATION_POSES, Effect, load_effect
+from ..effects import Effect, load_effect
 from ..errors import ConvergenceError, UserError
-from ..estimation.calibration import rows_that_identify
+from ..estimation.calibration import ALL_ROWS
 from ..files import check_writable_target, publish
 from ..model_choice import COSSERAT, ModelChoice, model_choice
 from ..params_io import ParameterFile, effect_specs, write_parameter_file
@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     if args.export is not None:
         write_export(args.export, diagnosis, choice, candidates or default_candidates(choice.requested), args, profile)
         console.print(f"wrote {render.plain(args.export)}")
-    print_next_steps(console, diagnosis, args, choice, candidates or default_candidates(choice.requested))
+    print_next_steps(console, diagnosis, args, candidates or default_candidates(choice.requested))
     if args.json:
         render.write_json(args.json, {"data": str(args.input), **diagnosis.as_dict(), "log_damage": log_damage})
     if args.report:
@@ -177,7 +177,7 @@ def write_export(path: Path, diagnosis: Diagnosis, choice: ModelChoice, candidat
     publish(path, "parameter file", lambda partial: write_parameter_file(partial, content))
 
 
-def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Namespace, choice: ModelChoice,
+def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Namespace,
                      candidates: Sequence[Effect]) -> None:
     """What to run next, as commands that run as printed (one per line, never wrapped)."""
     data = input_words(args)
@@ -194,9 +194,9 @@ def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Name
             "diagnose --candidate path/to/file.py:Class."])
         return
     spec = next((s for s in args.candidate if ":" in s and load_effect(s).name == effect.name), effect.name)
-    # Both calibrations fit the rows the verdict needs, so that compare shows what was promised.
-    rows = rows_that_identify((*choice.requested, effect))
-    fit_on = ("--fit-on", rows) if rows != CALIBRATION_POSES else ()
+    # Both calibrations fit the poses and the sweeps, as the diagnosis did (its training
+    # steps), so that compare shows what was promised.
+    fit_on = ("--fit-on", ALL_ROWS)
     lines = [command("calibrate", *data, *known, *fit_on, "-o", "before.toml")]
     if args.export is None:
         lines.append(command("calibrate", *data, *known, *fit_on, "--effect", spec, "-o", "after.toml"))
