@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UserError
+from ..files import make_folder_for
 from ..effects import CALIBRATION_POSES, SWEEPS, identifying_rows
 from ..estimation.calibration import (ALL_ROWS, DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_dataset,
                                       fit_mask, rows_that_identify)
@@ -74,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
     for first, second, correlation in result.unidentifiable:
         console.print(f"[yellow]warning:[/] {first} and {second} are not separately identifiable on these rows "
                       f"(correlation {correlation:+.3f}); their individual values mean little")
+    make_folder_for(args.output)
     write_parameter_file(args.output, ParameterFile(
         model=model.name, effects=effect_specs(model.effects, args.output.parent),
         parameters=dict(zip(result.names, map(float, result.values))),

@@ -26,7 +26,7 @@ from ..inputs import load_dataset
 from ..effects import Effect, load_effect
 from ..errors import ConvergenceError, UserError
 from ..estimation.calibration import ALL_ROWS
-from ..files import check_writable_target, publish
+from ..files import check_writable_target, make_folder_for, publish
 from ..model_choice import COSSERAT, ModelChoice, model_choice
 from ..params_io import ParameterFile, effect_specs, write_parameter_file
 from . import render
@@ -60,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
     choice = model_choice(args)  # validates --effect before the data is read
     candidates = tuple(load_effect(spec) for spec in dict.fromkeys(args.candidate)) or None
     if args.export is not None:
+        make_folder_for(args.export)
         check_writable_target(args.export, "parameter file", overwrite=False)  # before the minutes of fitting
     profile, steps = load_steps(args.input, args.profile)
     log_damage = warn_if_incomplete(args.input)
