@@ -47,10 +47,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if not args.position_weight >= 0:
         raise UserError(f"--position-weight must be >= 0, got {args.position_weight}")
+    choice = model_choice(args)  # validates --effect before the data is read
+    model = choice.model
     profile, steps = load_steps(args.input, args.profile)
     warn_if_incomplete(args.input)
-    choice = model_choice(args)
-    model = choice.model
     fit_on = args.fit_on or rows_that_identify(choice.requested)
     rows = fit_mask(steps, fit_on)
     if not rows.any():
