@@ -208,10 +208,10 @@ def print_breakdowns(console: Console, evaluation: Evaluation, steps: Dataset, n
 def print_jet_scales(console: Console, evaluation: Evaluation) -> None:
     if not evaluation.jet_scales:
         return
-    table = render.table(f"Force scale of each jet, from a per-jet fit ({evaluation.model.name}, Ref.)",
+    table = render.table(f"Force scale of each jet, from a fit of one gain per jet ({evaluation.model.name})",
                          labels=("jet",), numbers=("steps", "scale", "+-", "relative", "+-"),
-                         caption="scale: the factor on a jet's commanded force that best explains the steps it "
-                                 "drives, the rest of the model as calibrated; relative: over the jets' mean. A "
+                         caption="scale: a gain on each jet's commanded force, fitted with E0, EL, L and w_d on "
+                                 "the compared steps (1: as the model assumes); relative: over the jets' mean. A "
                                  "calibration absorbs a weak jet into E, so its per-jet error need not stand out; "
                                  "a relative scale below 1 by several standard errors does")
     for label, scale in evaluation.jet_scales.items():

@@ -29,6 +29,7 @@ from ..estimation.calibration import ALL_ROWS
 from ..files import check_writable_target, make_folder_for, publish
 from ..model_choice import COSSERAT, ModelChoice, model_choice
 from ..params_io import ParameterFile, effect_specs, write_parameter_file
+from ..profile import RigProfile
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
 from .log_notice import warn_if_incomplete
@@ -67,10 +68,11 @@ def run(args: argparse.Namespace) -> int:
     console = render.console_for(args)
     diagnosis = _diagnose(args, profile, steps, choice, candidates, Console(stderr=True))
     print_diagnosis(console, diagnosis, args)
+    tried = candidates or default_candidates(choice.requested)
     if args.export is not None:
-        write_export(args.export, diagnosis, choice, candidates or default_candidates(choice.requested), args, profile)
+        write_export(args.export, diagnosis, choice, tried, args, profile)
         console.print(f"wrote {render.plain(args.export)}")
-    print_next_steps(console, diagnosis, args, candidates or default_candidates(choice.requested))
+    print_next_steps(console, diagnosis, args, tried)
     if args.json:
         render.write_json(args.json, {"data": str(args.input), **diagnosis.as_dict(), "log_damage": log_damage})
     if args.report:
@@ -151,7 +153,7 @@ def _verdict_effect(diagnosis: Diagnosis, candidates: Sequence[Effect]) -> Effec
 
 
 def write_export(path: Path, diagnosis: Diagnosis, choice: ModelChoice, candidates: Sequence[Effect],
-                 args: argparse.Namespace, profile) -> None:
+                 args: argparse.Namespace, profile: RigProfile) -> None:
     """The verdict's model and calibrated parameters as a parameter file (`params_io`):
     the winner's fit when an effect is named, else the baseline's; effects from files are
     written relative to ``path``."""
