@@ -19,7 +19,7 @@ from .estimation.calibration import DEFAULT_NAMES
 from .models import make_model
 from .models.shooting import ShootingModel
 from .params import ModelParameters
-from .params_io import ParameterFile, read_parameter_file
+from .params_io import ParameterFile, read_parameter_file, resolve_effect_spec
 
 
 @dataclass(frozen=True)
@@ -99,8 +99,21 @@ def model_choice(args: argparse.Namespace, defaults: ModelDefaults = COSSERAT) -
 
 
 def _file_effect_specs(parameter_file: ParameterFile, path: Path, effect_files: Sequence[str]) -> list[str]:
+    """The parameter file's effects as specs: a file it names relative to itself, unless
+    an effect file of the command line has the same name (the command line wins); a name
+    outside the library, from an older file, is looked up among those effect files."""
     named_files = {load_effect(spec).name: spec for spec in effect_files}
-    specs = [named_files.get(name, name) for name in parameter_file.effects]
+    specs = []
+    for spec in parameter_file.effects:
+        if ":" in spec:
+            resolved = resolve_effect_spec(spec, path)
+            try:
+                name = load_effect(resolved).name
+            except UserError as error:
+                raise UserError(f"{path}: effects: {error}") from None
+            specs.append(named_files.get(name, resolved))
+            continue
+        specs.append(named_files.get(spec, spec))
     for spec in specs:
         if spec not in LIBRARY and ":" not in spec:
             raise UserError(f"{path}: effect {spec!r} is not in the library ({', '.join(sorted(LIBRARY))}); "

@@ -3,7 +3,8 @@
 Layout (SI units, the same names as `hydrojet_bench.params`)::
 
     model = "cosserat"            # the model they were calibrated for
-    effects = ["gravity"]         # the effects that were enabled
+    effects = ["gravity", "effects/tether.py:Tether"]   # the effects that were enabled:
+                                  # library names, or a user's file relative to this file
     [parameters]                  # flat names: E0, EL, L, wd_fx .. wd_mz, effect.parameter
     E0 = 2.98e5
     ...
@@ -23,6 +24,8 @@ from typing import Any
 import msgspec
 
 from .config.loading import convert, read_toml
+from .effects import Effect
+from .effects.user import CheckedEffect
 from .config.schema import Finite
 from .errors import UserError
 from .params import PARAMETER_NAMES, PLAUSIBLE_RANGES, ModelParameters, check_plausible, with_parameters
@@ -50,6 +53,22 @@ class ParameterFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_
             return with_parameters(params, self.parameters)
         except (KeyError, ValueError) as error:
             raise UserError(f"{source}: [parameters] {error.args[0]}") from None
+
+
+def effect_specs(effects: Sequence[Effect], folder: Path) -> tuple[str, ...]:
+    """``effects`` as a parameter file in ``folder`` lists them: library effects by name,
+    a user's effect as its file (relative to ``folder``) and class."""
+    return tuple(effect.spec_from(folder) if isinstance(effect, CheckedEffect) else effect.name
+                 for effect in effects)
+
+
+def resolve_effect_spec(spec: str, path: Path) -> str:
+    """An effect spec read from the parameter file ``path``: a file relative to it made
+    usable from anywhere; a name as it is."""
+    file, colon, class_name = spec.rpartition(":")
+    if not colon or Path(file).is_absolute():
+        return spec
+    return f"{Path(path).parent / file}:{class_name}"
 
 
 def _format(value: object) -> str:

@@ -5,9 +5,12 @@ time order) and the `Comparison` of one prediction method on them. Each breakdow
 answers a question a missing effect would leave a mark on:
 
 * by driving jet and by bending direction: a jet delivering the wrong force, a rotated
-  jet ring or an anisotropic rod err in some directions only;
+  jet ring or an anisotropic rod err in some directions only; a calibration absorbs a
+  weak jet into E, so each jet's force scale from a per-jet fit (`jet_force_scales`)
+  says which jet differs where the per-jet errors cannot;
 * loading against unloading: clamp play and friction make the two branches of a sweep
-  differ at the same force (the hysteresis gap);
+  differ at the same force (the hysteresis gap, judged against what noise alone gives,
+  `noise_only_gap`);
 * by region of the workspace (bend bin x bending direction): stiffening errs at large
   bends, gravity on one side;
 * over time: drift (water uptake, temperature, a sensor slipping on the rod);
@@ -28,8 +31,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..data.dataset import Dataset
+from ..effects import load_effect, qualified_parameter_names
+from ..errors import ConvergenceError
+from ..estimation.calibration import DEFAULT_NAMES, calibrate, calibration_poses
 from ..estimation.path import Predictions
 from ..geometry import body_rotation_error, matrix_from_quat
+from ..models import make_model
+from ..models.shooting import ShootingModel
+from ..params import JET_COUNT, ModelParameters
 from .compare import Comparison, measured_bend_deg
 from .metrics import ErrorSummary, bend_bin_labels, bend_bin_names, breakdown, summarise
 
@@ -46,6 +55,18 @@ FORCE_MATCH_FRACTION = 1e-3
 DEFAULT_TIME_BLOCKS = 6
 DEFAULT_WORST_COUNT = 10
 MISSING_LABEL = "what the model is missing"
+# The mean norm of the difference of two independent isotropic 3-D noise vectors, each
+# of RMS norm 1: sqrt(2/3) E[chi_3] = 4 / sqrt(3 pi). A hysteresis gap (loading minus
+# unloading residual at the same force) of pure noise is this times the noise floor;
+# the norm's relative standard deviation is sqrt(3 pi / 8 - 1) ~ 0.42 (chi_3).
+NOISE_GAP_PER_FLOOR = 4.0 / np.sqrt(3.0 * np.pi)
+NOISE_GAP_RELATIVE_SD = float(np.sqrt(3.0 * np.pi / 8.0 - 1.0))
+# A gap beyond this many standard errors of the noise-only mean is not noise.
+GAP_SIGNIFICANCE_SE = 3.0
+# The per-jet fit starts at the calibrated optimum: a few dozen evaluations settle it,
+# and digits beyond 1e-6 of the cost change no scale a reader compares.
+JET_SCALE_EVALUATIONS = 40
+JET_SCALE_COST_TOLERANCE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -166,6 +187,86 @@ def break_down(comparison: Comparison, steps: Dataset, time_blocks: int = DEFAUL
         drift=drift(orientation, position, steps.time_s, time_blocks),
         worst=worst_poses(comparison, steps, worst_count),
     )
+
+
+@dataclass(frozen=True)
+class JetScale:
+    """One jet's force scale: the factor on its commanded force that, fitted together
+    with the other jets' and the calibration's own parameters (E0, EL, L, w_d) on the
+    compared steps, best explains them; 1 means it pushes as the model assumes.
+    relative: the scale over the mean of the jets' scales, with its standard error: a
+    calibration absorbs a scale common to all jets into E, so only differences between
+    jets point at one. steps: the steps it drives."""
+
+    steps: int
+    scale: float
+    standard_error: float
+    relative: float
+    relative_standard_error: float
+
+    def as_dict(self) -> dict:
+        return {key: getattr(self, key) for key in self.__dataclass_fields__}
+
+
+@dataclass(frozen=True)
+class GapVerdict:
+    """A hysteresis gap (deg) against what noise alone gives at a noise floor (deg):
+    ``noise_only_deg`` = `NOISE_GAP_PER_FLOOR` x floor; ``limit_deg`` adds
+    `GAP_SIGNIFICANCE_SE` standard errors of a mean over the matched pairs;
+    ``beyond_noise``: the gap exceeds the limit."""
+
+    gap_deg: float
+    floor_deg: float
+    noise_only_deg: float
+    limit_deg: float
+    beyond_noise: bool
+
+    def as_dict(self) -> dict:
+        return {key: getattr(self, key) for key in self.__dataclass_fields__}
+
+
+def noise_only_gap(gap_deg: float, matched_pairs: int, floor_deg: float) -> GapVerdict:
+    """Judge a hysteresis gap over ``matched_pairs`` pairs against the noise floor
+    ``floor_deg`` (the RMS angle noise alone leaves, as `diagnose` measures it)."""
+    noise_only = NOISE_GAP_PER_FLOOR * floor_deg
+    limit = noise_only * (1.0 + GAP_SIGNIFICANCE_SE * NOISE_GAP_RELATIVE_SD / np.sqrt(max(matched_pairs, 1)))
+    return GapVerdict(gap_deg, floor_deg, float(noise_only), float(limit), bool(gap_deg > limit))
+
+
+def jet_force_scales(model: ShootingModel, params: ModelParameters, steps: Dataset) -> dict[str, JetScale]:
+    """Each driving jet's `JetScale`: the model plus a gain per jet (`jet_gain`), fitted
+    from ``params`` on ``steps`` as one path in time order; empty when the fit fails
+    (a model that cannot follow the steps has worse problems than a jet)."""
+    gains = load_effect("jet_gain")
+    own = qualified_parameter_names(gains)
+    fitted_model = (model if any(effect.name == gains.name for effect in model.effects)
+                    else make_model(model.name, (*model.effects, gains)))
+    try:
+        result = calibrate(fitted_model, calibration_poses(steps), params, DEFAULT_NAMES + own, follow_path=True,
+                           max_evaluations=JET_SCALE_EVALUATIONS, cost_tolerance=JET_SCALE_COST_TOLERANCE)
+    except (ConvergenceError, ValueError):
+        return {}
+    columns = [result.names.index(name) for name in own]
+    start = np.array([params.effect_value(name, 1.0) for name in own])
+    scale = result.values[columns] / start
+    covariance = (result.correlation[np.ix_(columns, columns)]
+                  * np.outer(result.standard_errors[columns], result.standard_errors[columns])
+                  / np.outer(start, start))
+    labels = driving_jet_labels(steps)
+    driving = [jet for jet in range(JET_COUNT) if np.any(labels == f"jet {jet + 1}")]
+    if not driving:
+        return {}
+    mean = float(np.mean(scale[driving]))
+    table = {}
+    for jet in driving:
+        # Delta method: d(s_j / mean)/ds_k = (delta_jk - s_j / n) / mean over the driving jets.
+        gradient = np.zeros(JET_COUNT)
+        gradient[driving] = -scale[jet] / (len(driving) * mean**2)
+        gradient[jet] += 1.0 / mean
+        table[f"jet {jet + 1}"] = JetScale(int(np.sum(labels == f"jet {jet + 1}")), float(scale[jet]),
+                                           float(np.sqrt(covariance[jet, jet])), float(scale[jet] / mean),
+                                           float(np.sqrt(max(gradient @ covariance @ gradient, 0.0))))
+    return table
 
 
 # --- residuals -----------------------------------------------------------------------

@@ -1,8 +1,12 @@
-"""`hydrojet-bench calibrate INPUT [--model M] [--effect NAME ...] -o params.toml`.
+"""`hydrojet-bench calibrate INPUT [--model M] [--effect NAME ...] [--fit-on ROWS] -o params.toml`.
 
 Fits E0, EL, L and the constant disturbance wrench w_d (plus the parameters of the
---effect's) to the calibration rows (sweep -1) of the input, as in the paper's
-sec. V-B, and writes them with their standard errors as a parameter file.
+--effect's) to the rows of the input that identify them, and writes them with their
+standard errors as a parameter file. The rows: the calibration poses (sweep -1), as in
+the paper's sec. V-B, unless an --effect is identified only by sweeps (a clamp with
+play shows only along a path; pressure stiffening only over the range of jet forces
+the sweeps cover, `Effect.identified_by`): then the poses and the sweeps. ``--fit-on``
+chooses; the command says which rows it used and why.
 """
 
 from __future__ import annotations
@@ -10,12 +14,18 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import UserError
-from ..estimation.calibration import DEFAULT_POSITION_WEIGHT_RAD_PER_M, calibrate_dataset
-from ..model_choice import COSSERAT, model_choice
-from ..params_io import ParameterFile, write_parameter_file
+from ..files import make_folder_for
+from ..effects import CALIBRATION_POSES, SWEEPS, identifying_rows
+from ..estimation.calibration import (ALL_ROWS, DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_dataset,
+                                      fit_mask, rows_that_identify)
+from ..model_choice import COSSERAT, ModelChoice, model_choice
+from ..params_io import ParameterFile, effect_specs, write_parameter_file
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
+from .next_steps import command, input_words, print_next
 from .log_notice import warn_if_incomplete
 
 
@@ -28,42 +38,77 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--position-weight", type=float, default=DEFAULT_POSITION_WEIGHT_RAD_PER_M,
                         metavar="RAD_PER_M", help="weight of tip position errors when positions were "
                         f"measured (default {DEFAULT_POSITION_WEIGHT_RAD_PER_M:g}; 0 = orientation only)")
+    parser.add_argument("--fit-on", choices=FIT_ON, default=None,
+                        help="rows to fit: the calibration poses (sweep -1), the sweeps, or all (default: the "
+                             "poses, and all when an --effect is identified only by sweeps)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     if not args.position_weight >= 0:
         raise UserError(f"--position-weight must be >= 0, got {args.position_weight}")
+    choice = model_choice(args)  # validates --effect before the data is read
+    model = choice.model
     profile, steps = load_steps(args.input, args.profile)
     warn_if_incomplete(args.input)
-    if len(steps.calibration_rows()) == 0:
-        raise UserError(f"{args.input}: no calibration poses (steps of sweep -1) to fit on; record some "
-                        "with `hydrojet-bench run --plan calibration`")
-    choice = model_choice(args)
-    model = choice.model
+    fit_on = args.fit_on or rows_that_identify(choice.requested)
+    rows = fit_mask(steps, fit_on)
+    if not rows.any():
+        plan = "sweeps" if fit_on == SWEEPS else "calibration"
+        raise UserError(f"{args.input}: no {_ROW_NAMES[fit_on]} to fit on; record some with "
+                        f"`hydrojet-bench run --plan {plan}`")
+    used = _rows_used(steps, rows)
     try:
         result = calibrate_dataset(model, steps, profile.model_parameters(), choice.calibration_names,
-                                   position_weight_rad_per_m=args.position_weight)
+                                   fit_on=fit_on, position_weight_rad_per_m=args.position_weight)
     except ValueError as error:
         raise UserError(f"{args.input}: {error}") from None
     console = render.console_for(args)
-    table = render.table(f"{model.name} calibrated on {len(steps.calibration_rows())} poses of {args.input}",
+    console.print(f"fitted on {used}{_why(args.fit_on, fit_on, choice)}", highlight=False)
+    table = render.table(f"{model.name} calibrated on {used} of {args.input}",
                          labels=("parameter",), numbers=("value", "standard error"))
     for name, value, error in zip(result.names, result.values, result.standard_errors):
         table.add_row(name, f"{value:.6g}", f"{error:.2g}")
     console.print(table)
-    console.print(f"RMS orientation error on the calibration poses: {result.rms_orientation_deg_before:.2f} deg "
+    console.print(f"RMS orientation error on the fitted rows: {result.rms_orientation_deg_before:.2f} deg "
                   f"before, {result.rms_orientation_deg_after:.2f} deg after ({result.evaluations} evaluations)")
     for first, second, correlation in result.unidentifiable:
-        console.print(f"[yellow]warning:[/] {first} and {second} are not separately identifiable on these poses "
+        console.print(f"[yellow]warning:[/] {first} and {second} are not separately identifiable on these rows "
                       f"(correlation {correlation:+.3f}); their individual values mean little")
+    make_folder_for(args.output)
     write_parameter_file(args.output, ParameterFile(
-        model=model.name, effects=tuple(effect.name for effect in model.effects),
+        model=model.name, effects=effect_specs(model.effects, args.output.parent),
         parameters=dict(zip(result.names, map(float, result.values))),
         standard_errors=dict(zip(result.names, map(float, result.standard_errors))),
-        calibration={"data": str(args.input), "profile": profile.source,
-                     "poses": len(steps.calibration_rows()),
+        calibration={"data": str(args.input), "profile": profile.source, "fit_on": fit_on,
+                     "poses": int(np.sum(rows & (steps.sweep == -1))),
+                     "sweep_steps": int(np.sum(rows & (steps.sweep >= 0))),
                      "rms_orientation_deg_before": round(result.rms_orientation_deg_before, 4),
                      "rms_orientation_deg_after": round(result.rms_orientation_deg_after, 4)}))
     console.print(f"wrote {render.plain(args.output)}")
+    compare = command("compare", *input_words(args), "--params", args.output, "--online")
+    print_next(console, "see how it predicts the sweeps with", [compare])
     return 0
+
+
+_ROW_NAMES = {CALIBRATION_POSES: "calibration poses (steps of sweep -1)", SWEEPS: "sweep steps (sweep >= 0)",
+              ALL_ROWS: "calibration poses or sweep steps"}
+
+
+def _rows_used(steps, rows: np.ndarray) -> str:
+    poses = int(np.sum(rows & (steps.sweep == -1)))
+    sweeps = np.unique(steps.sweep[rows & (steps.sweep >= 0)])
+    parts = [f"{poses} calibration poses"] if poses else []
+    if len(sweeps):
+        parts.append(f"{int(np.sum(rows & (steps.sweep >= 0)))} steps of {len(sweeps)} sweeps")
+    return " and ".join(parts)
+
+
+def _why(requested: str | None, fit_on: str, choice: ModelChoice) -> str:
+    if requested is not None:
+        return f" (--fit-on {requested})"
+    needing = [effect.name for effect in choice.requested if identifying_rows(effect) == SWEEPS]
+    if needing:
+        return (f" ({', '.join(needing)} cannot be identified on the calibration poses alone; "
+                "--fit-on calibration to fit the poses only)")
+    return " (the paper's calibration; --fit-on all to fit the sweeps too)"

@@ -18,14 +18,18 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 
-from ..analysis.breakdowns import (MISSING_LABEL, STRAIGHT, STRAIGHT_BELOW_DEG, Breakdowns, break_down,
-                                   direction_order, disturbance_by_sweep, per_step)
-from ..analysis.compare import Comparison, compare_methods
+from ..analysis.breakdowns import (MISSING_LABEL, STRAIGHT, STRAIGHT_BELOW_DEG, Breakdowns, JetScale, break_down,
+                                   direction_order, disturbance_by_sweep, jet_force_scales, noise_only_gap,
+                                   per_step)
+from ..analysis.compare import Comparison, compare, compare_methods
+from ..analysis.diagnosis import NoiseFloor, estimate_noise_floor
+from ..analysis.diagnosis.fitting import session_gravity
 from ..analysis.metrics import ErrorSummary
 from ..bench.replay import logged_steps
 from ..data.dataset import Dataset
 from ..errors import UserError
 from ..estimation import OnlineSettings
+from ..estimation.path import REF, PathPredictor, Predictions
 from ..model_choice import ModelChoice, choose_model, model_choice
 from ..models.shooting import ShootingModel
 from . import render
@@ -56,12 +60,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 @dataclass(frozen=True)
 class Evaluation:
     """One parameter file's model predicted on the compared steps: a Comparison and its
-    Breakdowns per method ("ref", "online")."""
+    Breakdowns per method ("ref", "online"); with --baseline also Ref. as `diagnose`
+    scores it (``as_diagnosed``: gravity held at the steps' mean when the base is
+    static, see `analysis.diagnosis.fitting.session_gravity`), the figure its promise is
+    checked against."""
 
     source: Path
     model: ShootingModel
     results: dict[str, Comparison]
     breakdowns: dict[str, Breakdowns]
+    jet_scales: dict[str, JetScale]
+    as_diagnosed: ErrorSummary | None = None
 
     @property
     def label(self) -> str:
@@ -84,18 +93,25 @@ def run(args: argparse.Namespace) -> int:
     def evaluate(choice: ModelChoice) -> Evaluation:
         params = choice.parameters(profile.model_parameters())
         results = compare_methods(choice.model, params, validation, OnlineSettings() if args.online else None)
+        # Per-step gravity (the live figures) lets a model follow the base sensor's noise,
+        # below the floor diagnose measures; its promise is checked the way it scored.
+        as_diagnosed = None if before_choice is None else compare(
+            Predictions.along(PathPredictor(choice.model, params).predict(validation, session_gravity(validation)),
+                              REF), validation).overall
         return Evaluation(choice.parameter_path, choice.model, results,
-                          {key: break_down(c, validation) for key, c in results.items()})
+                          {key: break_down(c, validation) for key, c in results.items()},
+                          jet_force_scales(choice.model, params, validation), as_diagnosed)
 
     after = evaluate(after_choice)
     before = None if before_choice is None else evaluate(before_choice)
+    noise = noise_floor(steps)
     console = render.console_for(args)
     print_tables(console, after.results, f"{after.model.name} on {args.input}")
-    print_breakdowns(console, after, validation)
+    print_breakdowns(console, after, validation, noise)
     if before is not None:
         print_before_after(console, before, after)
     if args.json:
-        write_json(args.json, validation, after, before, log_damage)
+        write_json(args.json, validation, after, before, log_damage, noise)
     if args.report:
         from ..analysis.report import write_report
 
@@ -135,15 +151,24 @@ def print_tables(console: Console, results: dict[str, Comparison], title: str) -
     console.print(table)
 
 
-def print_breakdowns(console: Console, evaluation: Evaluation, steps: Dataset) -> None:
+def noise_floor(steps: Dataset) -> NoiseFloor | None:
+    """The noise floor `diagnose` measures (repeatability of repeated sweeps), or None
+    when no sweep repeats."""
+    try:
+        return estimate_noise_floor(steps)
+    except UserError:
+        return None
+
+
+def print_breakdowns(console: Console, evaluation: Evaluation, steps: Dataset, noise: NoiseFloor | None) -> None:
     """Compact tables of where the model fails; the full series go to JSON and plots."""
     parts = evaluation.breakdowns
     reference = parts["ref"]
     table = render.table(f"Where the model fails: RMS errors by physical grouping ({evaluation.model.name})",
                          labels=("group",), numbers=["n", *_method_headers(parts)],
                          caption="direction: azimuth of the measured tip tangent in the base frame; hysteresis "
-                                 "gap: mean norm of the difference of the error vectors at equal forces "
-                                 "(noise alone makes it about 1.4 x the RMS)")
+                                 "gap: mean norm of the difference of the error vectors at equal forces, "
+                                 "judged below against the noise floor")
 
     def across(cells: Callable[[Breakdowns], list[str]]) -> list[str]:
         return [cell for part in parts.values() for cell in cells(part)]
@@ -171,10 +196,40 @@ def print_breakdowns(console: Console, evaluation: Evaluation, steps: Dataset) -
     table.add_row("trend per min", "", *across(lambda b: [_number(b.drift.trend_deg_per_min, signed=True),
                                                           _number(b.drift.trend_mm_per_min, signed=True)]))
     console.print(table)
+    print_jet_scales(console, evaluation)
+    if reference.loading.hysteresis_gap_deg is not None:
+        console.print(_gap_line(reference, noise), highlight=False)
     print_region(console, reference, evaluation.model.name)
     print_worst(console, evaluation)
     if "online" in evaluation.results:
         console.print(_missing_line(evaluation.results["online"], steps))
+
+
+def print_jet_scales(console: Console, evaluation: Evaluation) -> None:
+    if not evaluation.jet_scales:
+        return
+    table = render.table(f"Force scale of each jet, from a fit of one gain per jet ({evaluation.model.name})",
+                         labels=("jet",), numbers=("steps", "scale", "+-", "relative", "+-"),
+                         caption="scale: a gain on each jet's commanded force, fitted with E0, EL, L and w_d on "
+                                 "the compared steps (1: as the model assumes); relative: over the jets' mean. A "
+                                 "calibration absorbs a weak jet into E, so its per-jet error need not stand out; "
+                                 "a relative scale below 1 by several standard errors does")
+    for label, scale in evaluation.jet_scales.items():
+        table.add_row(label, str(scale.steps), f"{scale.scale:.3f}", f"{scale.standard_error:.3f}",
+                      f"{scale.relative:.3f}", f"{scale.relative_standard_error:.3f}")
+    console.print(table)
+
+
+def _gap_line(reference: Breakdowns, noise: NoiseFloor | None) -> str:
+    loading = reference.loading
+    gap = f"Hysteresis gap of Ref. {loading.hysteresis_gap_deg:.3f} deg over {loading.matched_pairs} pairs"
+    if noise is None:
+        return f"{gap}: no noise floor to judge it by (no sweep repeats)."
+    verdict = noise_only_gap(loading.hysteresis_gap_deg, loading.matched_pairs, noise.orientation_deg)
+    judged = ("beyond noise: the branches differ (clamp play or friction?)" if verdict.beyond_noise
+              else "within noise")
+    return (f"{gap}; noise alone gives {verdict.noise_only_deg:.3f} deg (up to {verdict.limit_deg:.3f} deg) at the "
+            f"noise floor of {noise.orientation_deg:.3f} deg ({noise.method}, as diagnose measures it): {judged}.")
 
 
 def _bend_label(bend_bin: str) -> str:
@@ -242,8 +297,13 @@ def print_before_after(console: Console, before: Evaluation, after: Evaluation) 
             table.add_row(label, *cells)
 
         row("all", lambda c: c.overall)
+        if key == "ref" and after.as_diagnosed is not None and before.as_diagnosed is not None:
+            row("all, as diagnose scores", lambda c: (after if c is new else before).as_diagnosed)
         for sweep in new.by_sweep:
             row(f"sweep {sweep}", lambda c, s=sweep: c.by_sweep[s])
+        if key == "ref":
+            table.caption = ("as diagnose scores: gravity held at the steps' mean (a clamped base), as diagnose "
+                             "fits and scores; compare this row with the errors diagnose promised")
         console.print(table)
     if "online" in after.results:
         means = [float(_moment_norm_nm(e.results["online"]).mean()) for e in (before, after)]
@@ -279,15 +339,24 @@ def figures(evaluation: Evaluation, steps: Dataset) -> dict:
         document["missing_wrench"] = {
             "label": MISSING_LABEL, "quantity": "online disturbance estimate, moment part, N m, tip frame",
             "by_sweep": {str(s): v for s, v in disturbance_by_sweep(results["online"].predictions, steps).items()}}
+    document["jet_force_scale"] = {label: scale.as_dict() for label, scale in evaluation.jet_scales.items()}
+    if evaluation.as_diagnosed is not None:
+        document["as_diagnosed"] = {**evaluation.as_diagnosed.as_dict(),
+                                    "gravity": "the steps' mean when the base is static, as diagnose scores"}
     document["parameters"] = {"file": str(evaluation.source), "model": evaluation.model.name,
                               "effects": [effect.name for effect in evaluation.model.effects]}
     return document
 
 
 def write_json(path: Path, steps: Dataset, evaluation: Evaluation, baseline: Evaluation | None = None,
-               log_damage: dict | None = None) -> None:
+               log_damage: dict | None = None, noise: NoiseFloor | None = None) -> None:
     document = figures(evaluation, steps)
     document["log_damage"] = log_damage
+    document["noise_floor"] = None if noise is None else noise.as_dict()
+    gap = evaluation.breakdowns["ref"].loading
+    document["hysteresis_gap_vs_noise"] = (None if noise is None or gap.hysteresis_gap_deg is None else
+                                           noise_only_gap(gap.hysteresis_gap_deg, gap.matched_pairs,
+                                                          noise.orientation_deg).as_dict())
     if baseline is not None:
         document["baseline"] = figures(baseline, steps)
     render.write_json(path, document)

@@ -12,25 +12,32 @@ plan of the poses that tell them apart is written (never over an existing file).
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from pathlib import Path
+
+import numpy as np
 
 from rich.console import Console
 from rich.panel import Panel
 
 from ..analysis.diagnosis import NONE, UNEXPLAINED, Diagnosis, DiagnosisSettings, diagnose
-from ..analysis.diagnosis.engine import DEFAULT_DEPTH
+from ..analysis.diagnosis.engine import DEFAULT_DEPTH, default_candidates
 from ..analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
 from ..analysis.diagnosis.noise import repeatability_floor
 from ..analysis.diagnosis.separate import separating_plan, write_separating_plan
-from ..files import check_writable_target, create_numbered
 from ..plans import DEFAULT_SETTLE_S
 from ..inputs import load_dataset
-from ..effects import load_effect
+from ..effects import Effect, load_effect
 from ..errors import ConvergenceError, UserError
+from ..estimation.calibration import ALL_ROWS
+from ..files import check_writable_target, create_numbered, make_folder_for, publish
 from ..model_choice import COSSERAT, ModelChoice, model_choice
+from ..params_io import ParameterFile, effect_specs, write_parameter_file
+from ..profile import RigProfile
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
 from .log_notice import warn_if_incomplete
+from .next_steps import command, effect_words, input_words, print_next
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -49,6 +56,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--separating-plan", type=Path, metavar="PATH",
                         help="where to write the plan that tells tied candidates apart (default: "
                              "separating-plan.toml in the --report folder, else beside INPUT; never overwritten)")
+    parser.add_argument("--export", type=Path, metavar="PARAMS",
+                        help="write the verdict's calibrated parameters (the model with the named effect, fitted as "
+                             "scored; the baseline's when none is named) as a parameter file (a new file)")
     parser.epilog = ("--effect names effects known to be present: they join the baseline (gravity at its nominal "
                      "weight, E0, EL, L, w_d) and are calibrated with it. Every --candidate is then tried on top.")
     parser.set_defaults(func=run)
@@ -63,11 +73,19 @@ def run(args: argparse.Namespace) -> int:
         check_writable_target(args.separating_plan, "plan file", overwrite=False)
     choice = model_choice(args)  # validates --effect before the data is read
     candidates = tuple(load_effect(spec) for spec in dict.fromkeys(args.candidate)) or None
+    if args.export is not None:
+        make_folder_for(args.export)
+        check_writable_target(args.export, "parameter file", overwrite=False)  # before the minutes of fitting
     profile, steps = load_steps(args.input, args.profile)
     log_damage = warn_if_incomplete(args.input)
     console = render.console_for(args)
     diagnosis = _diagnose(args, profile, steps, choice, candidates, Console(stderr=True))
     print_diagnosis(console, diagnosis, args)
+    tried = candidates or default_candidates(choice.requested)
+    if args.export is not None:
+        write_export(args.export, diagnosis, choice, tried, args, profile)
+        console.print(f"wrote {render.plain(args.export)}")
+    print_next_steps(console, diagnosis, args, tried)
     if args.json:
         render.write_json(args.json, {"data": str(args.input), **diagnosis.as_dict(), "log_damage": log_damage})
     if args.report:
@@ -176,19 +194,69 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
     if final.remaining_excess:
         lines.append("Even with it the held-out error stays above the noise floor: something else is missing too.")
     console.print(Panel("\n".join(lines), title=title, border_style=style))
-    console.print(_next_steps(diagnosis, args))
 
 
-def _next_steps(diagnosis: Diagnosis, args: argparse.Namespace) -> str:
-    data = str(args.input) + (f" --profile {args.profile}" if args.profile else "")
-    options = f" --model {diagnosis.model}" + "".join(f" --effect {spec}" for spec in args.effect)
-    if diagnosis.verdict == NONE:
-        return f"Next: the model is complete for these data; calibrate it with `calibrate {data}{options} -o p.toml`."
-    if diagnosis.verdict == UNEXPLAINED:
-        return (f"Next: see where it fails with `calibrate {data}{options} -o p.toml` and `compare {data} --params "
-                "p.toml --online --report DIR`, write the missing physics as an effect file (see docs/examples/), "
-                f"and try it with `diagnose {data}{options} --candidate FILE.py:Class`.")
-    found = "".join(f" --effect {effect.effect}" for effect in diagnosis.found)
-    return (f"Next: `calibrate {data}{options} -o before.toml`, then `calibrate {data}{options}{found} "
-            f"-o after.toml`, then `compare {data} --params after.toml --baseline before.toml "
-            "--online` to watch the error fall.")
+def _found_effects(diagnosis: Diagnosis, candidates: Sequence[Effect]) -> list[Effect]:
+    """The effects the diagnosis named, over all its stages, in the order it named them."""
+    by_name = {effect.name: effect for effect in candidates}
+    return [by_name[found.effect] for found in diagnosis.found if found.effect in by_name]
+
+
+def write_export(path: Path, diagnosis: Diagnosis, choice: ModelChoice, candidates: Sequence[Effect],
+                 args: argparse.Namespace, profile: RigProfile) -> None:
+    """The verdict's model and calibrated parameters as a parameter file (`params_io`):
+    the last stage's winning fit (it carries every effect named before it in its
+    baseline), else that stage's baseline; effects from files are written relative to
+    ``path``."""
+    final = diagnosis.final
+    winner, found = final.winner, _found_effects(diagnosis, candidates)
+    if winner is not None and found:
+        fitted, heldout = winner.calibrated, winner.heldout_orientation_rmse_deg
+    else:
+        baseline = final.baseline
+        fitted = {name: (float(value), float(error))
+                  for name, value, error in zip(baseline.names, baseline.values, baseline.standard_errors)}
+        heldout = final.baseline_heldout_rmse_deg
+    effects = [*([] if any(e.name == "gravity" for e in choice.requested) else [load_effect("gravity")]),
+               *choice.requested]
+    effects += [effect for effect in found if all(e.name != effect.name for e in effects)]
+    content = ParameterFile(
+        model=diagnosis.model, effects=effect_specs(effects, path.parent),
+        parameters={name: value for name, (value, _) in fitted.items()},
+        standard_errors={name: error for name, (_, error) in fitted.items() if np.isfinite(error)},
+        calibration={"data": str(args.input), "profile": profile.source, "fit_on": "diagnose",
+                     "rows": diagnosis.split.description, "verdict": diagnosis.verdict,
+                     "heldout_orientation_rmse_deg": round(heldout, 4),
+                     "noise_floor_deg": round(diagnosis.noise_floor_deg, 4)})
+    publish(path, "parameter file", lambda partial: write_parameter_file(partial, content))
+
+
+def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Namespace,
+                     candidates: Sequence[Effect]) -> None:
+    """What to run next, as commands that run as printed (one per line, never wrapped)."""
+    data = input_words(args)
+    known = ("--model", diagnosis.model, *effect_words(args.effect))
+    found = _found_effects(diagnosis, candidates)
+    if not found:
+        calibrate = command("calibrate", *data, *known, "-o", "p.toml")
+        if diagnosis.verdict == NONE:
+            print_next(console, "the model is complete for these data; calibrate it with", [calibrate])
+            return
+        print_next(console, "see where it fails with", [
+            calibrate, command("compare", *data, "--params", "p.toml", "--online", "--report", "report"),
+            "then write the missing physics as an effect file (see docs/examples/) and try it with "
+            "diagnose --candidate path/to/file.py:Class."])
+        return
+    specs = [next((s for s in args.candidate if ":" in s and load_effect(s).name == effect.name), effect.name)
+             for effect in found]
+    # Both calibrations fit the poses and the sweeps, as the diagnosis did (its training
+    # steps), so that compare shows what was promised.
+    fit_on = ("--fit-on", ALL_ROWS)
+    lines = [command("calibrate", *data, *known, *fit_on, "-o", "before.toml")]
+    if args.export is None:
+        lines.append(command("calibrate", *data, *known, *fit_on, *effect_words(specs), "-o", "after.toml"))
+    lines.append(command("compare", *data, "--params", args.export or "after.toml", "--baseline", "before.toml",
+                         "--online"))
+    print_next(console, f"with {' + '.join(effect.name for effect in found)} the held-out error should fall from "
+               f"{diagnosis.baseline_heldout_rmse_deg:.3f} deg to about "
+               f"{diagnosis.found[-1].heldout_orientation_rmse_deg:.3f} deg; watch it with", lines)

@@ -29,6 +29,7 @@ from ..model_choice import ModelDefaults, model_choice
 from ..profile import load_profile
 from . import render
 from .common import add_model_arguments, check_seed
+from .next_steps import command
 
 DEFAULT_LOG_DIR = Path("sessions")
 
@@ -199,8 +200,14 @@ def _print_outcome(console: Console, result, model_name: str, args: argparse.Nam
                     console.print(f"wrote {render.plain(path)}")
     log = result.log_path
     console.print("\nnext:")
-    for line in (f"hydrojet-bench replay {log} --online            # re-run the estimation offline",
-                 f"hydrojet-bench compare {log} --params P.toml --online  # Table II from the log",
-                 f"hydrojet-bench diagnose {log} --model {model_name}     # which physical effect is missing?",
-                 f"hydrojet-bench sensors {log} --report sensors/  # IMU versus EM tracker"):
-        console.print(f"  {render.plain(line)}", highlight=False)
+    # Only what runs on this log: calibrate needs calibration poses, diagnose sweeps too.
+    poses = steps is not None and bool((steps.sweep == -1).any())
+    sweeps = steps is not None and bool((steps.sweep >= 0).any())
+    for line in (f"{command('replay', log, '--online')}  # re-run the estimation offline",
+                 *([f"{command('calibrate', log, '-o', 'p.toml')}  # calibrate on the logged poses",
+                    f"{command('compare', log, '--params', 'p.toml', '--online')}  # Table II from the log"]
+                   if poses else []),
+                 *([f"{command('diagnose', log, '--model', model_name)}  # which physical effect is missing?"]
+                   if poses and sweeps else []),
+                 f"{command('sensors', log, '--report', 'sensors/')}  # IMU versus EM tracker"):
+        console.print(f"  {line}", highlight=False, markup=False, soft_wrap=True)

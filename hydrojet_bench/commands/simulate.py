@@ -14,12 +14,14 @@ from pathlib import Path
 from rich.console import Console
 
 from ..data.csv_io import write_csv
-from ..effects import load_effect
+from ..errors import UserError
 from ..files import check_writable_target, make_folder_for, publish
 from ..plans import paper_protocol
 from ..profile import load_profile
 from ..twin import DigitalTwin, TwinConfig
+from ..twin.hidden import HIDDEN, inert_effects, parse_hidden
 from .common import check_seed
+from .next_steps import command, print_next
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -27,9 +29,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("-o", "--output", type=Path, required=True, help="CSV file to write (a new file)")
     parser.add_argument("--overwrite", action="store_true", help="replace the output file if it exists")
     parser.add_argument("--profile", default="sim", help="rig profile (default: sim)")
-    parser.add_argument("--hidden", action="append", default=[], metavar="EFFECT",
-                        help="physics the twin has and the models may not: a library name or "
-                             "path/to/file.py:Class (repeatable; replaces the profile's [twin] hidden_effects)")
+    parser.add_argument("--hidden", action="append", default=[], metavar="EFFECT[=VALUE]",
+                        help="physics the twin has and the models may not: NAME=VALUE (a vector comma-separated, "
+                             "in the order of its parameters), NAME:PARAMETER=VALUE, or path/to/file.py:Class "
+                             f"(repeatable; replaces the profile's [twin] hidden_effects). Names: {', '.join(HIDDEN)}")
     parser.add_argument("--seed", type=int, default=None, help="noise seed (default: the profile's, else 0)")
     parser.set_defaults(func=run)
 
@@ -41,16 +44,34 @@ def run(args: argparse.Namespace) -> int:
     profile = load_profile(args.profile)
     changes: dict[str, object] = {}
     if args.hidden:
-        changes["hidden_effects"] = tuple(load_effect(spec) for spec in args.hidden)
+        choice = parse_hidden(args.hidden)
+        names = {effect.name for effect in choice.effects}
+        # The profile's values still hold for the effects named here; the command line wins.
+        kept = {key: value for key, value in profile.config.twin.hidden_effect_values.items()
+                if key.partition(".")[0] in names}
+        changes["hidden_effects"] = choice.effects
+        changes["hidden_effect_values"] = tuple({**kept, **dict(choice.values)}.items())
     if args.seed is not None:
         changes["seed"] = args.seed
     config = TwinConfig.from_profile(profile, **changes)
     hidden = config.hidden_effects
+    inert = inert_effects(hidden, dict(config.hidden_effect_values), config.true_params)
+    if inert:
+        effect = next(e for e in hidden if e.name == inert[0])
+        values = dict(config.hidden_effect_values)
+        at = ", ".join(f"{p.name} {values.get(f'{effect.name}.{p.name}', p.default):g}" for p in effect.parameters)
+        raise UserError(f"--hidden {effect.name}: at {at or 'its only setting'} it leaves the twin's rod as it is "
+                        f"(its identity) and would hide nothing; give it a size, e.g. --hidden {effect.name}=VALUE "
+                        f"or {effect.name}:PARAMETER=VALUE")
     twin = DigitalTwin(config)
     recording = twin.run_plan(paper_protocol())
     dataset = recording.to_dataset(profile, f"twin seed {config.seed}")
     rows = publish(args.output, "recording", lambda partial: write_csv(dataset, partial), overwrite=args.overwrite)
     hidden_names = ", ".join(effect.name for effect in hidden) or "none"
-    Console().print(f"wrote {rows} samples (229 steps: 40 calibration poses, 9 sweeps) to {args.output}; "
-                    f"hidden effects: {hidden_names}", markup=False)
+    console = Console()
+    console.print(f"wrote {rows} samples (229 steps: 40 calibration poses, 9 sweeps) to {args.output}; "
+                  f"hidden effects: {hidden_names}", markup=False)
+    # A CSV file is read with the "sim" profile unless told otherwise.
+    profile_words = () if args.profile == "sim" else ("--profile", args.profile)
+    print_next(console, "which effect is hidden? Ask with", [command("diagnose", args.output, *profile_words)])
     return 0

@@ -8,7 +8,8 @@ import sys
 from pathlib import Path
 
 from ..errors import UserError
-from .base import Effect, EffectParameter, effect_values, qualified_parameter_names
+from .base import (CALIBRATION_POSES, SWEEPS, Effect, EffectParameter, effect_values, identifying_rows,
+                   qualified_parameter_names)
 from .anisotropic_stiffness import AnisotropicStiffness
 from .base_compliance import BaseCompliance
 from .base_hysteresis import BaseHysteresis
@@ -32,8 +33,8 @@ LIBRARY: dict[str, type] = {
                    SensorMounting)
 }
 
-__all__ = ["Effect", "EffectParameter", "LIBRARY", "effect_values", "load_effect",
-           "qualified_parameter_names"]
+__all__ = ["CALIBRATION_POSES", "Effect", "EffectParameter", "LIBRARY", "SWEEPS", "effect_values",
+           "identifying_rows", "load_effect", "qualified_parameter_names"]
 
 
 def load_effect(spec: str) -> Effect:

@@ -73,6 +73,10 @@ class Effect(Protocol):
         `ModelParameters.effect_values` under ``"<name>.<parameter>"``.
     uses_actuation: True when `apply` reads ``problem.jet_forces_n`` (the model then
         rebuilds the problem for every jet command instead of reusing it).
+    identified_by: the rows a calibration needs to see the effect: `CALIBRATION_POSES`
+        (the static poses alone) or `SWEEPS` (the poses and the sweeps: an effect that
+        acts through the path, or through how hard the jets push, which the poses
+        sample too sparsely). Optional for a user's effect (`identifying_rows`).
     """
 
     name: ClassVar[str]
@@ -83,6 +87,16 @@ class Effect(Protocol):
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         """Edit ``problem`` in place; ``values`` maps each parameter name to its value."""
         ...
+
+
+# What `Effect.identified_by` may say; also `calibrate --fit-on`'s choices, with "all".
+CALIBRATION_POSES, SWEEPS = "calibration", "sweeps"
+
+
+def identifying_rows(effect: Effect) -> str:
+    """``effect.identified_by``; for a user's effect that does not say, `SWEEPS` when it
+    reads the jet forces, else `CALIBRATION_POSES`."""
+    return getattr(effect, "identified_by", SWEEPS if effect.uses_actuation else CALIBRATION_POSES)
 
 
 def effect_values(effect: Effect, params: ModelParameters) -> dict[str, float]:

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from .base import EffectParameter
+from .base import CALIBRATION_POSES, EffectParameter
 
 if TYPE_CHECKING:
     from .problem import RodProblem
@@ -55,6 +55,7 @@ class BaseCompliance:
                         physical_upper=COMPLIANCE_LIMIT_RAD_PER_NM, limit_reason=COMPLIANCE_LIMIT_REASON),
     )
     uses_actuation: ClassVar[bool] = False
+    identified_by: ClassVar[str] = CALIBRATION_POSES
 
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         add_clamp_bending_compliance(problem, values["compliance_rad_per_nm"])

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, ClassVar
 
-from .base import EffectParameter
+from .base import SWEEPS, EffectParameter
 from .base_compliance import (COMPLIANCE_BOUNDS_RAD_PER_NM, COMPLIANCE_LIMIT_RAD_PER_NM, COMPLIANCE_LIMIT_REASON,
                               add_clamp_bending_compliance)
 
@@ -48,6 +48,7 @@ class BaseHysteresis:
                                      "being held"),
     )
     uses_actuation: ClassVar[bool] = False
+    identified_by: ClassVar[str] = SWEEPS
 
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         add_clamp_bending_compliance(problem, values["compliance_rad_per_nm"])

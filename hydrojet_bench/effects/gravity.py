@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from .base import EffectParameter
+from .base import CALIBRATION_POSES, EffectParameter
 
 if TYPE_CHECKING:
     from .problem import RodProblem
@@ -32,6 +32,7 @@ class Gravity:
                                      "doubles the capsule's mass and fills every lumen)"),
     )
     uses_actuation: ClassVar[bool] = False
+    identified_by: ClassVar[str] = CALIBRATION_POSES
 
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         params = problem.params

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from .base import EffectParameter
+from .base import CALIBRATION_POSES, EffectParameter
 
 if TYPE_CHECKING:
     from .problem import RodProblem
@@ -46,6 +46,7 @@ class JetGain:
         for jet in (1, 2, 3)
     )
     uses_actuation: ClassVar[bool] = False
+    identified_by: ClassVar[str] = CALIBRATION_POSES
 
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         gains = np.array([values["gain_1"], values["gain_2"], values["gain_3"]])

@@ -6,7 +6,7 @@ import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, ClassVar
 
-from .base import EffectParameter
+from .base import CALIBRATION_POSES, EffectParameter
 
 if TYPE_CHECKING:
     from .problem import RodProblem
@@ -45,6 +45,7 @@ class JetMisalignment:
                                      "relabelling of the jets"),
     )
     uses_actuation: ClassVar[bool] = False
+    identified_by: ClassVar[str] = CALIBRATION_POSES
 
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         problem.jet_ring_angle_rad = problem.jet_ring_angle_rad + values["ring_angle_rad"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, ClassVar
 
-from .base import EffectParameter
+from .base import CALIBRATION_POSES, EffectParameter
 
 if TYPE_CHECKING:
     from .problem import RodProblem
@@ -54,6 +54,7 @@ class NonlinearElasticity:
                                      "times the linear moment at 60 1/m, past any fibre-laden elastomer"),
     )
     uses_actuation: ClassVar[bool] = False
+    identified_by: ClassVar[str] = CALIBRATION_POSES
 
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         problem.cubic_stiffening_m2 = problem.cubic_stiffening_m2 + values["beta_m2"]

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from .base import EffectParameter, scale_modulus
+from .base import EffectParameter, SWEEPS, scale_modulus
 
 if TYPE_CHECKING:
     from .problem import RodProblem
@@ -52,6 +52,7 @@ class PressureStiffening:
                                      "stiffer than its wall at full force is a rigid tube"),
     )
     uses_actuation: ClassVar[bool] = True
+    identified_by: ClassVar[str] = SWEEPS
 
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         scale_modulus(problem, 1.0 + values["coefficient_1_n"] * float(np.sum(problem.jet_forces_n)))

@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, ClassVar
 
 from ..geometry import so3_exp
-from .base import EffectParameter
+from .base import CALIBRATION_POSES, EffectParameter
 
 if TYPE_CHECKING:
     from .problem import RodProblem
@@ -58,6 +58,7 @@ class SensorMounting:
         for axis in "xyz"
     )
     uses_actuation: ClassVar[bool] = False
+    identified_by: ClassVar[str] = CALIBRATION_POSES
 
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         rotation = so3_exp([values["rx_rad"], values["ry_rad"], values["rz_rad"]])

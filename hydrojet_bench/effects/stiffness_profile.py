@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, ClassVar
 
-from .base import EffectParameter, scale_modulus
+from .base import CALIBRATION_POSES, EffectParameter, scale_modulus
 
 if TYPE_CHECKING:
     from .problem import RodProblem
@@ -49,6 +49,7 @@ class StiffnessProfile:
                                      "sleeve rather than a curing gradient"),
     )
     uses_actuation: ClassVar[bool] = False
+    identified_by: ClassVar[str] = CALIBRATION_POSES
 
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         fraction = problem.arc_length_m / problem.params.rod.length_m

@@ -10,18 +10,26 @@ each into a `UserError` naming the file and the class.
 from __future__ import annotations
 
 import inspect
+import os
+import re
 from collections.abc import Mapping
 from dataclasses import fields
+from pathlib import Path
 
 import numpy as np
 
 from ..errors import UserError
 from ..params import ModelParameters
-from .base import Effect, EffectParameter, effect_values
+from .base import CALIBRATION_POSES, SWEEPS, Effect, EffectParameter, effect_values, identifying_rows
 from .problem import RodProblem
 
-# Sample points of the trial problem an effect is applied to when it is loaded.
+# Sample points of the trial problems an effect is applied to when it is loaded, and
+# their jet forces (N): at rest, then each jet alone (an effect may act only when the
+# jets push, or push one way).
 _TRIAL_SAMPLES = 5
+_TRIAL_FORCES_N = (np.zeros(3), *(0.05 * np.eye(3)))
+_PROBLEM_FIELDS = frozenset(item.name for item in fields(RodProblem))
+_MISSING_ATTRIBUTE = re.compile(r"'RodProblem' object has no attribute '(\w+)'")
 
 
 class CheckedEffect:
@@ -31,14 +39,24 @@ class CheckedEffect:
     def __init__(self, effect: Effect, origin: str) -> None:
         self.effect = effect
         self.origin = origin
+        path, _, self.class_name = origin.rpartition(":")
+        self.file = Path(path).resolve()
         self.name: str = effect.name
         self.explanation: str = effect.explanation
         self.parameters: tuple[EffectParameter, ...] = tuple(effect.parameters)
         self.uses_actuation: bool = effect.uses_actuation
+        self.identified_by: str = identifying_rows(effect)
 
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         try:
             self.effect.apply(problem, values)
+        except AttributeError as error:
+            # Assigning a misspelt attribute raises without .name (slots): read it from the text.
+            missing = _MISSING_ATTRIBUTE.fullmatch(str(error))
+            if missing is not None and missing.group(1) not in _PROBLEM_FIELDS:
+                raise UserError(f"effect {self.origin}: apply uses problem.{missing.group(1)}, which RodProblem "
+                                "does not have (see hydrojet_bench/effects/problem.py)") from None
+            raise UserError(f"effect {self.origin}: apply failed: AttributeError: {error}") from None
         except (Exception, SystemExit) as error:
             raise UserError(f"effect {self.origin}: apply failed: {type(error).__name__}: {error}") from None
         for item in fields(problem):
@@ -46,6 +64,11 @@ class CheckedEffect:
             if isinstance(value, (float, np.ndarray)) and not np.all(np.isfinite(value)):
                 raise UserError(f"effect {self.origin}: apply left a non-finite value (NaN or inf) in "
                                 f"problem.{item.name}")
+
+    def spec_from(self, folder: Path) -> str:
+        """This effect as ``path/to/file.py:ClassName`` with the path relative to ``folder``
+        (where a parameter file that names it lives), so that both can move together."""
+        return f"{Path(os.path.relpath(self.file, Path(folder).resolve())).as_posix()}:{self.class_name}"
 
     def __repr__(self) -> str:
         return f"{self.origin} ({self.name})"
@@ -72,6 +95,9 @@ def checked_effect(effect: object, origin: str, reserved_names: Mapping[str, obj
         raise UserError(f"effect {origin}: two parameters share a name")
     if not isinstance(effect.uses_actuation, bool):  # type: ignore[attr-defined]
         raise UserError(f"effect {origin}: uses_actuation must be True or False")
+    if identifying_rows(effect) not in (CALIBRATION_POSES, SWEEPS):  # type: ignore[arg-type]
+        raise UserError(f"effect {origin}: identified_by must be {CALIBRATION_POSES!r} or {SWEEPS!r}, "
+                        f"got {effect.identified_by!r}")  # type: ignore[attr-defined]
     apply = effect.apply  # type: ignore[attr-defined]
     try:
         inspect.signature(apply).bind(None, {})
@@ -79,9 +105,34 @@ def checked_effect(effect: object, origin: str, reserved_names: Mapping[str, obj
         raise UserError(f"effect {origin}: apply must take (problem, values), not {_signature(apply)}") from None
     checked = CheckedEffect(effect, origin)  # type: ignore[arg-type]
     nominal = ModelParameters()
-    trial = RodProblem.nominal(nominal, np.zeros(3), np.linspace(0.0, nominal.rod.length_m, _TRIAL_SAMPLES))
-    checked.apply(trial, effect_values(checked, nominal))
+    defaults = effect_values(checked, nominal)
+    plain = [_trial(checked, nominal, forces, defaults) for forces in _TRIAL_FORCES_N]
+    for parameter in parameters:
+        # A parameter apply never reads (a misspelt key read with .get, a value written to
+        # a local) would be calibrated to noise and reported as if it were physics.
+        moved = parameter.upper if parameter.upper != parameter.default else parameter.lower
+        if moved == parameter.default:
+            continue
+        changed = {**defaults, parameter.name: moved}
+        if all(_same(_trial(checked, nominal, forces, changed), unchanged)
+               for forces, unchanged in zip(_TRIAL_FORCES_N, plain)):
+            raise UserError(f"effect {origin}: parameter {parameter.name!r} changes nothing apply sets "
+                            f"(from {parameter.default:g} to {moved:g}); apply must use values[{parameter.name!r}]")
     return checked
+
+
+def _trial(effect: CheckedEffect, params: ModelParameters, jet_forces_n: np.ndarray,
+           values: Mapping[str, float]) -> RodProblem:
+    """The nominal rod's problem at ``jet_forces_n`` with ``effect`` applied at ``values``."""
+    problem = RodProblem.nominal(params, jet_forces_n, np.linspace(0.0, params.rod.length_m, _TRIAL_SAMPLES))
+    effect.apply(problem, values)
+    return problem
+
+
+def _same(first: RodProblem, second: RodProblem) -> bool:
+    return all(np.array_equal(getattr(first, item.name), getattr(second, item.name))
+               if isinstance(getattr(first, item.name), np.ndarray)
+               else getattr(first, item.name) == getattr(second, item.name) for item in fields(first))
 
 
 def _signature(function: object) -> str:

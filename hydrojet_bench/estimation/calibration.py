@@ -42,7 +42,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..data.dataset import Dataset
-from ..effects import EffectParameter
+from ..effects import CALIBRATION_POSES, SWEEPS, Effect, EffectParameter, identifying_rows
 from ..errors import ConvergenceError
 from ..geometry import body_rotation_error, matrix_from_quat
 from ..models.shooting import ShootingModel, Solution
@@ -323,13 +323,45 @@ def calibration_poses(steps: Dataset) -> list[CalibrationPose]:
                             None if positions is None else positions[i]) for i in range(len(steps))]
 
 
+ALL_ROWS = "all"
+# `calibrate --fit-on`: the calibration poses (sweep -1), the sweeps, or both.
+FIT_ON = (CALIBRATION_POSES, SWEEPS, ALL_ROWS)
+
+
+def rows_that_identify(effects: Sequence[Effect]) -> str:
+    """The rows a calibration of ``effects`` fits by default: the calibration poses,
+    unless one of them is identified only by sweeps (`Effect.identified_by`), then all."""
+    return ALL_ROWS if any(identifying_rows(effect) == SWEEPS for effect in effects) else CALIBRATION_POSES
+
+
+def fit_mask(steps: Dataset, fit_on: str) -> np.ndarray:
+    """Which rows of ``steps`` a calibration on ``fit_on`` (one of `FIT_ON`) fits."""
+    if fit_on == CALIBRATION_POSES:
+        return steps.sweep == -1
+    if fit_on == SWEEPS:
+        return (steps.sweep >= 0) & steps.valid_mask()
+    if fit_on == ALL_ROWS:
+        return (steps.sweep == -1) | ((steps.sweep >= 0) & steps.valid_mask())
+    raise ValueError(f"fit_on must be one of {', '.join(FIT_ON)}, got {fit_on!r}")
+
+
 def calibrate_dataset(model: ShootingModel, steps: Dataset, initial: ModelParameters,
-                      names: Sequence[str] = DEFAULT_NAMES, **options) -> CalibrationResult:
-    """Calibrate on the dataset's calibration rows (sweep -1); ``options`` as `calibrate`."""
-    rows = steps.calibration_rows()
-    if len(rows) == 0:
-        raise ValueError(f"{steps.source or 'dataset'} has no calibration rows (sweep -1)")
-    return calibrate(model, calibration_poses(rows), initial, names, **options)
+                      names: Sequence[str] = DEFAULT_NAMES, *, fit_on: str = CALIBRATION_POSES,
+                      **options) -> CalibrationResult:
+    """Calibrate on the dataset's rows that ``fit_on`` picks (`fit_mask`); ``options`` as
+    `calibrate`. On the calibration poses alone they are independent poses, as the paper
+    fits them; with sweeps the steps are one path in recorded order (``follow_path``), so
+    a clamp with play sees loading and unloading as the rig did, and the rows not fitted
+    before the last fitted one are solved to carry that path."""
+    mask = fit_mask(steps, fit_on)
+    if not mask.any():
+        what = "calibration rows (sweep -1)" if fit_on == CALIBRATION_POSES else "sweep rows (sweep >= 0)"
+        raise ValueError(f"{steps.source or 'dataset'} has no {what} to fit on")
+    if fit_on == CALIBRATION_POSES:
+        return calibrate(model, calibration_poses(steps.select(mask)), initial, names, **options)
+    solved = slice(0, int(np.flatnonzero(mask)[-1]) + 1)
+    return calibrate(model, calibration_poses(steps.select(np.arange(len(steps))[solved])), initial, names,
+                     follow_path=True, fitted=mask[solved], **options)
 
 
 def _default(model: ShootingModel, name: str) -> float | None:

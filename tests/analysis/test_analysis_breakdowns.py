@@ -16,9 +16,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hydrojet_bench.analysis.breakdowns import (break_down, direction_labels, disturbance_by_sweep,
-                                                driving_jet_labels, drift, load_phases, loading_split,
-                                                orientation_residuals_deg, per_step, worst_poses)
+from hydrojet_bench.analysis.breakdowns import (NOISE_GAP_PER_FLOOR, break_down, direction_labels,
+                                                disturbance_by_sweep, driving_jet_labels, drift, load_phases,
+                                                loading_split, noise_only_gap, orientation_residuals_deg, per_step,
+                                                worst_poses)
 from hydrojet_bench.analysis.compare import compare
 from hydrojet_bench.estimation.path import Predictions
 from hydrojet_bench.data.dataset import Dataset
@@ -220,3 +221,20 @@ def test_without_positions_the_position_figures_are_none():
     assert parts.worst[0].position_error_mm is None
     assert math.isclose(parts.by_jet["jet 2"].orientation_rmse_deg, 0.5)
     assert per_step(comparison, no_positions)["position_residual_mm"] is None
+
+
+def test_a_gap_of_pure_noise_is_judged_noise_and_a_real_gap_is_not():
+    """Pairs of isotropic noise vectors of RMS norm ``floor`` leave a mean gap of
+    NOISE_GAP_PER_FLOOR x floor; the judgement allows for the mean over the pairs."""
+    rng = np.random.default_rng(5)
+    floor, pairs = 0.15, 60
+    for trial in range(20):
+        noise = rng.normal(scale=floor / math.sqrt(3.0), size=(2, pairs, 3))
+        gap = float(np.mean(np.linalg.norm(noise[0] - noise[1], axis=1)))
+        assert not noise_only_gap(gap, pairs, floor).beyond_noise, trial
+    verdict = noise_only_gap(gap, pairs, floor)
+    assert verdict.noise_only_deg == pytest.approx(NOISE_GAP_PER_FLOOR * floor)
+    assert verdict.noise_only_deg < verdict.limit_deg < 1.2 * verdict.noise_only_deg
+    # A clamp with play moves the unloading branch by 0.2 deg: no longer noise.
+    shifted = noise[0] + np.array([0.2, 0.0, 0.0])
+    assert noise_only_gap(float(np.mean(np.linalg.norm(shifted - noise[1], axis=1))), pairs, floor).beyond_noise

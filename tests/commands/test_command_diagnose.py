@@ -10,6 +10,8 @@ import pytest
 
 from hydrojet_bench.cli import main
 from hydrojet_bench.data.csv_io import write_csv
+from hydrojet_bench.params import PARAMETER_NAMES
+from hydrojet_bench.params_io import read_parameter_file
 from hydrojet_bench.plans import calibration_plan, validation_sweeps
 from hydrojet_bench.profile import load_profile
 from hydrojet_bench.twin import DigitalTwin, TwinConfig
@@ -92,3 +94,24 @@ def test_the_separating_plan_goes_beside_the_report_and_never_over_an_earlier_on
     beside_input = _write_separating_plan(SimpleNamespace(separating_plan=None, report=None,
                                                           input=tmp_path / "data.csv"), diagnosis)
     assert beside_input == tmp_path / "separating-plan.toml"
+
+
+def test_export_writes_the_verdicts_calibrated_parameters_and_never_overwrites(recorded, tmp_path, capsys):
+    exported, document = tmp_path / "fitted" / "after.toml", tmp_path / "diagnosis.json"
+    assert main(["diagnose", str(recorded), "--candidate", "jet_gain", "--candidate", "gravity",
+                 "--export", str(exported), "--json", str(document)]) == 0
+    winner = json.loads(document.read_text())["ranking"][0]
+    assert winner["effect"] == "jet_gain"
+    content = read_parameter_file(exported)
+    assert content.model == "cosserat" and content.effects == ("gravity", "jet_gain")
+    for name, fitted in winner["parameters"].items():  # the very numbers diagnose scored
+        assert content.parameters[name] == fitted["value"]
+        assert content.standard_errors[name] == fitted["standard_error"]
+    assert set(PARAMETER_NAMES) <= set(content.parameters)
+    assert content.calibration["verdict"] == "jet_gain"
+    assert content.calibration["heldout_orientation_rmse_deg"] == round(winner["heldout_orientation_rmse_deg"], 4)
+    printed = capsys.readouterr().out
+    assert f"--params {exported} --baseline before.toml" in printed and "--fit-on all -o before.toml" in printed
+    before = exported.read_text()
+    assert main(["diagnose", str(recorded), "--candidate", "jet_gain", "--export", str(exported)]) == 2
+    assert str(exported) in capsys.readouterr().err and exported.read_text() == before

@@ -9,6 +9,7 @@ import textwrap
 import numpy as np
 import pytest
 
+from hydrojet_bench.cli import main
 from hydrojet_bench.effects import LIBRARY, load_effect
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.geometry import so3_exp
@@ -80,20 +81,44 @@ def test_a_users_effect_from_a_file_changes_the_shape(tmp_path, model_type):
      "problem.distributed_moment_in_body_nm_m"),
     ("TorsionalPreload", USER_EFFECT.replace('problem.distributed_moment_in_body_nm_m[:, 2] +=',
                                              'problem.distributed_moment_nm_m ='),
-     "apply failed: AttributeError: 'RodProblem' object has no attribute 'distributed_moment_nm_m'"),
+     r"my_effect.py:TorsionalPreload: apply uses problem.distributed_moment_nm_m, which RodProblem does not have"),
+    ("TorsionalPreload", USER_EFFECT.replace('values["moment_per_length_nm_m"]', 'values.get("moment_nm_m", 0.0)'),
+     "my_effect.py:TorsionalPreload: parameter 'moment_per_length_nm_m' changes nothing apply sets"),
+    ("TorsionalPreload", USER_EFFECT.replace('name = "torsional_preload"', 'name = "gravity"'),
+     "my_effect.py:TorsionalPreload: name 'gravity' is a library effect's"),
 ])
 def test_bad_effect_files_give_clear_errors(tmp_path, spec_suffix, text, message):
     with pytest.raises(UserError, match=message):
         load_effect(f"{write(tmp_path, text)}:{spec_suffix}")
 
 
+@pytest.mark.parametrize("edit, message", [
+    (('name = "torsional_preload"', 'name = "jet_gain"'), "name 'jet_gain' is a library effect's"),
+    (('+= values["moment_per_length_nm_m"]', '+= np.nan'), "apply left a non-finite value (NaN or inf)"),
+    (('+= values["moment_per_length_nm_m"]', '+= 1 / 0'), "apply failed: ZeroDivisionError: division by zero"),
+    (('problem.distributed_moment_in_body_nm_m[:, 2] +=', 'problem.tip_moment ='),
+     "apply uses problem.tip_moment, which RodProblem does not have"),
+])
+def test_a_bad_effect_file_is_one_line_and_exit_2_from_any_command(tmp_path, capsys, edit, message):
+    effect = f"{write(tmp_path, USER_EFFECT.replace(*edit))}:TorsionalPreload"
+    for argv in (["calibrate", str(tmp_path / "unread.csv"), "--effect", effect, "-o", str(tmp_path / "p.toml")],
+                 ["simulate", "-o", str(tmp_path / "x.csv"), "--hidden", effect],
+                 ["diagnose", str(tmp_path / "unread.csv"), "--candidate", effect]):
+        assert main(argv) == 2, argv
+        error = capsys.readouterr().err
+        assert error.count("\n") == 1 and "Traceback" not in error, error
+        assert f"effect {effect}" in error and message in error, error
+
+
 def test_an_effect_that_fails_only_on_some_forces_is_named_when_it_fails(tmp_path):
     text = USER_EFFECT.replace('uses_actuation = False', 'uses_actuation = True').replace(
-        '+= values["moment_per_length_nm_m"]', '+= 0.0 if problem.jet_forces_n[0] < 0.04 else np.inf')
+        '+= values["moment_per_length_nm_m"]',
+        '+= values["moment_per_length_nm_m"] + (0.0 if problem.jet_forces_n[0] < 0.07 else np.inf)')
+    # Beyond the forces it is tried at when loaded (0.05 N per jet).
     model = CosseratModel(effects=(load_effect(f"{write(tmp_path, text)}:TorsionalPreload"),))
     model.solve([0.0, 0.0, 0.0], PARAMS)
     with pytest.raises(UserError, match="my_effect.py:TorsionalPreload: apply left a non-finite value"):
-        model.solve([0.05, 0.0, 0.0], PARAMS)
+        model.solve([0.08, 0.0, 0.0], PARAMS)
 
 
 def test_unknown_names_and_missing_files_are_user_errors(tmp_path):

@@ -133,6 +133,8 @@ class CandidateResult:
     convergence: str = ""
     at_bound: tuple[str, ...] = ()
     widened: bool = False
+    # Every fitted parameter (the baseline's too): what `diagnose --export` writes.
+    calibrated: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -437,7 +439,9 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
             residual_correlation=cosine(signature, residual),
             online_correlation=cosine(online.equivalent_moment_nm(signature), online.missing_moment_nm),
             evaluations=result.evaluations, converged=result.converged, convergence=result.convergence,
-            at_bound=result.at_bound, widened=result.widened))
+            at_bound=result.at_bound, widened=result.widened,
+            calibrated={name: (float(value), float(error))
+                        for name, value, error in zip(result.names, result.values, result.standard_errors)}))
     ranking = tuple(sorted(results, key=lambda c: (c.error is not None, not c.converged, not c.qualifies, c.score)))
     qualifying = [c for c in ranking if c.qualifies]
     alternatives: tuple[str, ...] = ()

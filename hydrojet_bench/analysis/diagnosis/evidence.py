@@ -29,13 +29,8 @@ from ...geometry import body_rotation_error, matrix_from_quat, rotation_angle_de
 from ...models.shooting import ShootingModel
 from ...params import DISTURBANCE_MOMENT_NAMES, ModelParameters
 from ...sensitivity import sensitivity
-from ..breakdowns import driving_jet_labels, loading_split
+from ..breakdowns import NOISE_GAP_PER_FLOOR, driving_jet_labels, loading_split
 from ..compare import compare
-
-# The mean norm of the difference of two independent isotropic 3-D noise vectors, each
-# of RMS norm 1: sqrt(2/3) E[chi_3] = 4 / sqrt(3 pi). A hysteresis gap (loading minus
-# unloading residual at the same force) of pure noise is this times the noise floor.
-NOISE_GAP_PER_FLOOR = 4.0 / np.sqrt(3.0 * np.pi)
 
 
 def rotation_between(first: np.ndarray, second: np.ndarray) -> np.ndarray:

@@ -1,0 +1,67 @@
+"""`calibrate` fits an effect on the rows that identify it: clamp play shows only along a
+path that loads and unloads, so `base_hysteresis` gets the calibration poses and the
+sweeps by default; `--fit-on` chooses; the command says which rows it used."""
+
+from __future__ import annotations
+
+import pytest
+
+from hydrojet_bench.cli import main
+from hydrojet_bench.data.csv_io import write_csv
+from hydrojet_bench.effects import CALIBRATION_POSES, LIBRARY, SWEEPS, identifying_rows
+from hydrojet_bench.estimation.calibration import ALL_ROWS, rows_that_identify
+from hydrojet_bench.params_io import read_parameter_file
+from hydrojet_bench.plans import calibration_plan, validation_sweeps
+from hydrojet_bench.profile import load_profile
+from hydrojet_bench.twin import DigitalTwin, TwinConfig
+
+PLAY_RAD, COMPLIANCE_RAD_PER_NM = 0.02, 20.0
+
+
+@pytest.fixture(scope="module")
+def hysteretic(tmp_path_factory):
+    """20 calibration poses, then each jet swept up and down once in 11 steps, on a
+    clamp with play."""
+    profile = load_profile("sim")
+    twin = DigitalTwin(TwinConfig.from_profile(
+        profile, hidden_effects=("base_hysteresis",), seed=6,
+        hidden_effect_values=(("base_hysteresis.compliance_rad_per_nm", COMPLIANCE_RAD_PER_NM),
+                              ("base_hysteresis.play_rad", PLAY_RAD))))
+    plan = calibration_plan(20, seed=6) + validation_sweeps(steps_up=5, repetitions=1)
+    path = tmp_path_factory.mktemp("calibrate") / "hysteresis.csv"
+    write_csv(twin.run_plan(plan, record_window_s=1.0).to_dataset(profile, "short twin"), path)
+    return path
+
+
+def test_every_library_effect_says_which_rows_identify_it():
+    rows = {name: identifying_rows(effect()) for name, effect in LIBRARY.items()}
+    assert set(rows.values()) <= {CALIBRATION_POSES, SWEEPS}
+    assert {name for name, value in rows.items() if value == SWEEPS} == {"base_hysteresis", "pressure_stiffening"}
+    assert rows_that_identify([LIBRARY["jet_gain"]()]) == CALIBRATION_POSES
+    assert rows_that_identify([LIBRARY["jet_gain"](), LIBRARY["base_hysteresis"]()]) == ALL_ROWS
+
+
+def test_clamp_play_is_fitted_on_poses_and_sweeps_by_default(hysteretic, tmp_path, capsys):
+    output = tmp_path / "after.toml"
+    assert main(["calibrate", str(hysteretic), "--effect", "base_hysteresis", "-o", str(output)]) == 0
+    printed = " ".join(capsys.readouterr().out.split())
+    assert "fitted on 20 calibration poses and 33 steps of 3 sweeps (base_hysteresis cannot be identified" in printed
+    content = read_parameter_file(output)
+    assert content.calibration["fit_on"] == ALL_ROWS
+    assert (content.calibration["poses"], content.calibration["sweep_steps"]) == (20, 33)
+    assert content.parameters["base_hysteresis.play_rad"] == pytest.approx(PLAY_RAD, rel=0.15)
+    assert content.parameters["base_hysteresis.compliance_rad_per_nm"] == pytest.approx(COMPLIANCE_RAD_PER_NM,
+                                                                                         rel=0.15)
+
+
+@pytest.mark.parametrize("fit_on, said, poses, sweep_steps", [
+    ("calibration", "fitted on 20 calibration poses (--fit-on calibration)", 20, 0),
+    ("sweeps", "fitted on 33 steps of 3 sweeps (--fit-on sweeps)", 0, 33),
+])
+def test_fit_on_chooses_the_rows(hysteretic, tmp_path, capsys, fit_on, said, poses, sweep_steps):
+    output = tmp_path / "p.toml"
+    assert main(["calibrate", str(hysteretic), "--fit-on", fit_on, "-o", str(output)]) == 0
+    assert said in " ".join(capsys.readouterr().out.split())
+    content = read_parameter_file(output)
+    assert (content.calibration["fit_on"], content.calibration["poses"],
+            content.calibration["sweep_steps"]) == (fit_on, poses, sweep_steps)

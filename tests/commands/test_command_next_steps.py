@@ -1,0 +1,62 @@
+"""Every command a command prints as the next step runs as printed.
+
+One twin recording with a user's effect hidden (a clogged jet, from a file in a folder
+of its own): `simulate` suggests `diagnose`, which suggests the calibrations and the
+compare of the add step, and `calibrate` suggests `compare`; a parameter file written
+to another folder must still find the effect file.
+Each printed command is collected and run, in the folder the user would be in,
+expecting exit 0; so is every command those print, until none is new.
+"""
+
+from __future__ import annotations
+
+import shlex
+import shutil
+from pathlib import Path
+
+from hydrojet_bench.cli import main
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "docs/examples/clogged_jet.py"
+
+
+def printed_commands(output: str) -> list[list[str]]:
+    """The argument lists of the lines a command printed as ``hydrojet-bench ...``."""
+    return [shlex.split(line, comments=True)[1:] for line in output.splitlines()
+            if line.strip().startswith("hydrojet-bench ")]
+
+
+def run_all_printed(first: list[str], capsys) -> list[list[str]]:
+    """Run ``first`` and every command printed by it or by those it leads to; returns
+    every command run, in order."""
+    pending, done = [first], []
+    while pending:
+        argv = pending.pop(0)
+        if argv in done:
+            continue
+        capsys.readouterr()
+        code = main(argv)
+        captured = capsys.readouterr()
+        assert code == 0, (argv, captured.err)
+        done.append(argv)
+        pending += [command for command in printed_commands(captured.out) if command not in done]
+    return done
+
+
+def test_every_printed_next_command_runs_as_printed(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "effects").mkdir()
+    shutil.copy(EXAMPLE, tmp_path / "effects" / "clogged_jet.py")
+    effect = "effects/clogged_jet.py:CloggedJet"
+    ran = run_all_printed(["simulate", "-o", "data.csv", "--hidden", effect, "--seed", "2"], capsys)
+    names = [argv[0] for argv in ran]
+    assert names[:2] == ["simulate", "diagnose"]
+    # diagnose names an effect: both calibrations of the add step, the compare, and the
+    # compare each calibration suggests.
+    assert names.count("calibrate") == 2 and names.count("compare") >= 2, ran
+    assert any("--baseline" in argv for argv in ran)
+
+    # A parameter file written to another folder finds the user's effect file relative
+    # to itself, so the compare calibrate prints runs from where the user is.
+    ran = run_all_printed(["calibrate", "data.csv", "--effect", effect, "-o", "out/p.toml"], capsys)
+    assert 'effects = ["gravity", "../effects/clogged_jet.py:CloggedJet"]' in (tmp_path / "out/p.toml").read_text()
+    assert [argv[0] for argv in ran] == ["calibrate", "compare"]
