@@ -17,6 +17,7 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import msgspec
 import numpy as np
@@ -30,7 +31,11 @@ from ..profile import load_profile
 from . import render
 from .common import add_model_arguments, check_seed
 
+if TYPE_CHECKING:
+    from ..bench.foxglove_live import FoxgloveLive
+
 DEFAULT_LOG_DIR = Path("sessions")
+FOXGLOVE_PORT = 8765  # Foxglove's and Lichtblick's default for a WebSocket connection
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -52,10 +57,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, help="digital twin noise seed (default: the profile's)")
     parser.add_argument("--report", type=Path, metavar="DIR", help="write the session's figures to this folder")
     parser.add_argument("--no-live", action="store_true", help="no live view (plain progress lines)")
+    parser.add_argument("--foxglove", type=int, nargs="?", const=FOXGLOVE_PORT, metavar="PORT",
+                        help="stream the session to Foxglove or Lichtblick over their WebSocket protocol on "
+                             f"ws://127.0.0.1:PORT (default port {FOXGLOVE_PORT}; 0: any free port, printed)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    # The server first: a taken port stops the command before a log file is reserved.
+    with _foxglove(args.foxglove) as server:
+        return _run(args, server)
+
+
+def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
     from ..bench.plan_choice import choose_plan
     from ..bench.session import SessionRequest
 
@@ -101,8 +115,11 @@ def run(args: argparse.Namespace) -> int:
                   f"log {render.plain(log_path)}", highlight=False)
     if clipped_warning:
         console.print(f"[yellow]warning:[/] {clipped_warning}")
+    if server is not None:
+        console.print(f"Foxglove: open a connection to {server.url} (layout: docs/foxglove/hydrojet.json)",
+                      highlight=False, markup=False)
     result = asyncio.run(_run_session(request, console, live=not args.no_live and console.is_terminal,
-                                      clipped=frozenset(clipped)))
+                                      clipped=frozenset(clipped), on_log_message=server and server.publish))
     if result is None:
         console.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
         return 143
@@ -119,7 +136,16 @@ def _clipped_warning(clipped: tuple[int, ...], limits: tuple[float, ...]) -> str
             "at the clipped force")
 
 
-async def _run_session(request, console: Console, live: bool, clipped: frozenset[int]):
+def _foxglove(port: int | None) -> contextlib.AbstractContextManager:
+    """The live Foxglove server of ``--foxglove PORT`` (None without the option)."""
+    if port is None:
+        return contextlib.nullcontext()
+    from ..bench.foxglove_live import FoxgloveLive
+
+    return FoxgloveLive(port)
+
+
+async def _run_session(request, console: Console, live: bool, clipped: frozenset[int], on_log_message=None):
     from ..bench.live_view import LiveView
     from ..bench.session import Session
 
@@ -138,7 +164,7 @@ async def _run_session(request, console: Console, live: bool, clipped: frozenset
     try:
         with view_context as view:
             on_update = view.update if live else _printer(console, clipped)
-            session = Session(request, on_update=on_update)
+            session = Session(request, on_update=on_update, on_log_message=on_log_message)
             return await session.run()
     except asyncio.CancelledError:
         if terminated:
