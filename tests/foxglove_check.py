@@ -121,6 +121,18 @@ def _time_fields(type_name: str) -> tuple[tuple[str, int], ...] | None:
     return None
 
 
+def _fields(definitions: Definitions, type_name: str) -> tuple[Field, ...]:
+    time_fields = _time_fields(type_name)
+    if time_fields:
+        return tuple(Field(name, kind, False, "") for name, kind in time_fields)
+    return definitions.messages[type_name]
+
+
+def _unknown(fields: tuple[Field, ...], names: set[str], type_name: str, where: str) -> list[str]:
+    known = {field.name for field in fields}
+    return [f"{where}.{name}: no such field in {type_name}" for name in sorted(names) if name not in known]
+
+
 def message_problems(schema_name: str, message: Any, bench_fields: frozenset[str] = frozenset({"t_s"})) -> list[str]:
     """How ``message`` (decoded JSON) differs from Foxglove's ``schema_name``: a field
     missing, unknown or of another type, each as ``"field.path: what"``. The top-level
@@ -133,11 +145,8 @@ def _object_problems(definitions: Definitions, type_name: str, value: Any, where
                      extra: frozenset[str] = frozenset()) -> list[str]:
     if not isinstance(value, dict):
         return [f"{where}: expected an object {type_name}, got {type(value).__name__}"]
-    time_fields = _time_fields(type_name)
-    fields = (tuple(Field(name, kind, False, "") for name, kind in time_fields) if time_fields
-              else definitions.messages[type_name])
-    problems = [f"{where}.{name}: no such field in {type_name}" for name in value.keys() - extra
-                if name not in {field.name for field in fields}]
+    fields = _fields(definitions, type_name)
+    problems = _unknown(fields, value.keys() - extra, type_name, where)
     for field in fields:
         if field.name not in value:
             problems.append(f"{where}.{field.name}: missing")
@@ -150,7 +159,7 @@ def _object_problems(definitions: Definitions, type_name: str, value: Any, where
                 problems += _value_problems(definitions, field, item, f"{where}.{field.name}[{index}]")
         else:
             problems += _value_problems(definitions, field, value[field.name], f"{where}.{field.name}")
-    if time_fields and not problems and not 0 <= value["nsec"] < _NS_PER_S:
+    if _time_fields(type_name) and not problems and not 0 <= value["nsec"] < _NS_PER_S:
         problems.append(f"{where}.nsec: {value['nsec']} outside [0, 1e9)")
     return problems
 
@@ -180,7 +189,8 @@ _JSON_TYPES = {_BOOL: "boolean", _STRING: "string", _BYTES: "string", _ENUM: "in
                _MESSAGE: "object"} | dict.fromkeys(_FLOATS, "number") | dict.fromkeys(_INTEGERS, "integer")
 
 
-def json_schema_problems(schema_name: str, schema: dict, bench_fields: frozenset[str] = frozenset({"t_s"})) -> list[str]:
+def json_schema_problems(schema_name: str, schema: dict,
+                         bench_fields: frozenset[str] = frozenset({"t_s"})) -> list[str]:
     """How the JSON schema a log registers for ``schema_name`` differs from Foxglove's
     definition: a property missing, unknown or of another JSON type."""
     definitions = official_definitions(schema_name)
@@ -191,12 +201,9 @@ def _schema_problems(definitions: Definitions, type_name: str, schema: dict, whe
                      extra: frozenset[str] = frozenset()) -> list[str]:
     if schema.get("type") != "object":
         return [f"{where}: type {schema.get('type')!r} where {type_name} is an object"]
-    time_fields = _time_fields(type_name)
-    fields = (tuple(Field(name, kind, False, "") for name, kind in time_fields) if time_fields
-              else definitions.messages[type_name])
+    fields = _fields(definitions, type_name)
     properties = schema.get("properties", {})
-    problems = [f"{where}.{name}: no such field in {type_name}" for name in properties.keys() - extra
-                if name not in {field.name for field in fields}]
+    problems = _unknown(fields, properties.keys() - extra, type_name, where)
     for field in fields:
         if field.name not in properties:
             problems.append(f"{where}.{field.name}: missing")
