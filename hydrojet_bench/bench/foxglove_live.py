@@ -29,8 +29,6 @@ class FoxgloveLive:
     """
 
     def __init__(self, port: int, host: str = LOOPBACK) -> None:
-        if not 0 <= port <= 65535:
-            raise UserError(f"--foxglove: a TCP port is 0 to 65535, got {port}")
         self.host = host
         self._requested_port = port
         self._server: foxglove.WebSocketServer | None = None
@@ -59,7 +57,7 @@ class FoxgloveLive:
             self._server = foxglove.start_server(name="HydroJet Bench", host=self.host, port=self._requested_port,
                                                  context=context)
         except RuntimeError as error:  # the SDK's FoxgloveError, e.g. the port taken
-            raise UserError(f"--foxglove {self._requested_port}: cannot listen on {self.host}: {error}") from None
+            raise UserError(f"--foxglove {self.host}:{self._requested_port}: cannot listen: {error}") from None
         try:
             self._channels = {
                 topic: foxglove.Channel(topic, message_encoding=MESSAGE_ENCODING, context=context,

@@ -57,9 +57,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, help="digital twin noise seed (default: the profile's)")
     parser.add_argument("--report", type=Path, metavar="DIR", help="write the session's figures to this folder")
     parser.add_argument("--no-live", action="store_true", help="no live view (plain progress lines)")
-    parser.add_argument("--foxglove", type=int, nargs="?", const=FOXGLOVE_PORT, metavar="PORT",
+    parser.add_argument("--foxglove", nargs="?", const=str(FOXGLOVE_PORT), metavar="[HOST:]PORT",
                         help="stream the session to Foxglove or Lichtblick over their WebSocket protocol on "
-                             f"ws://127.0.0.1:PORT (default port {FOXGLOVE_PORT}; 0: any free port, printed)")
+                             f"ws://HOST:PORT (default 127.0.0.1:{FOXGLOVE_PORT}; port 0: any free one, printed; "
+                             "the server has no authentication: another HOST opens the session to that network)")
     parser.set_defaults(func=run)
 
 
@@ -136,13 +137,16 @@ def _clipped_warning(clipped: tuple[int, ...], limits: tuple[float, ...]) -> str
             "at the clipped force")
 
 
-def _foxglove(port: int | None) -> contextlib.AbstractContextManager:
-    """The live Foxglove server of ``--foxglove PORT`` (None without the option)."""
-    if port is None:
+def _foxglove(address: str | None) -> contextlib.AbstractContextManager:
+    """The live Foxglove server of ``--foxglove [HOST:]PORT`` (None without the option)."""
+    if address is None:
         return contextlib.nullcontext()
-    from ..bench.foxglove_live import FoxgloveLive
+    from ..bench.foxglove_live import LOOPBACK, FoxgloveLive
 
-    return FoxgloveLive(port)
+    host, _, port = address.rpartition(":")
+    if not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise UserError(f"--foxglove {address}: expected [HOST:]PORT, a port 0 to 65535")
+    return FoxgloveLive(int(port), host or LOOPBACK)
 
 
 async def _run_session(request, console: Console, live: bool, clipped: frozenset[int], on_log_message=None):

@@ -34,6 +34,7 @@ class FoxgloveClient:
     """A connection to ``ws://host:port``; a context manager."""
 
     def __init__(self, host: str, port: int, timeout_s: float = 10.0) -> None:
+        self.timeout_s = timeout_s
         self.socket = socket.create_connection((host, port), timeout=timeout_s)
         key = base64.b64encode(os.urandom(16)).decode()
         self.socket.sendall((f"GET / HTTP/1.1\r\nHost: {host}:{port}\r\nUpgrade: websocket\r\n"
@@ -90,7 +91,10 @@ class FoxgloveClient:
         return None
 
     def _frame(self) -> tuple[int, bytes]:
-        first, second = self._exactly(2)
+        (first,) = self._exactly(1)
+        # A frame begun is read whole: a short wait for the next frame must not cut one.
+        self.socket.settimeout(self.timeout_s)
+        (second,) = self._exactly(1)
         length = second & 0x7F
         if length == 126:
             (length,) = struct.unpack(">H", self._exactly(2))

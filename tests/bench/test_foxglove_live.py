@@ -156,23 +156,28 @@ def test_the_server_stops_when_the_session_fails() -> None:
                     with contextlib.suppress(TimeoutError):
                         message = client.receive(timeout_s=0.1)
                         break
+                else:
+                    pytest.fail("the client never received a message on /events")
             raise RuntimeError(message.data["message"])
     assert (message.topic, message.log_time_ns, decode("/events", encode(event))) == ("/events", 1_500_000_000, event)
     assert _refused(port)
 
 
-def test_a_taken_port_is_one_line_and_no_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_taken_port_or_a_bad_address_is_one_line_and_no_log(tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
     log = tmp_path / "run.mcap"
     with FoxgloveLive(0) as live:
         port = live.port
-        with pytest.raises(UserError, match=f"--foxglove {port}: cannot listen on 127.0.0.1: .*in use"):
+        with pytest.raises(UserError, match=f"--foxglove 127.0.0.1:{port}: cannot listen: .*in use"):
             FoxgloveLive(port).__enter__()
         assert main(["run", "--plan", "hold:1", "--no-live", "--log", str(log), "--foxglove", str(port)]) == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"error: --foxglove {port}: cannot listen") and err.count("\n") == 1, err
+    assert err.startswith(f"error: --foxglove 127.0.0.1:{port}: cannot listen") and err.count("\n") == 1, err
+    for address in ("70000", "localhost", "127.0.0.1:port"):
+        assert main(["run", "--plan", "hold:1", "--no-live", "--log", str(log), "--foxglove", address]) == 2
+        err = capsys.readouterr().err
+        assert err == f"error: --foxglove {address}: expected [HOST:]PORT, a port 0 to 65535\n", err
     assert not log.exists()
-    assert main(["run", "--plan", "hold:1", "--no-live", "--log", str(log), "--foxglove", "70000"]) == 2
-    assert "--foxglove: a TCP port is 0 to 65535, got 70000" in capsys.readouterr().err
 
 
 def test_the_layout_plots_numbers_the_topics_have() -> None:
