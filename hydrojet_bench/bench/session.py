@@ -143,8 +143,10 @@ class SessionResult:
 
 class Session:
     def __init__(self, request: SessionRequest, clock: Clock | None = None,
-                 on_update: Callable[[SessionStatus], None] | None = None) -> None:
+                 on_update: Callable[[SessionStatus], None] | None = None,
+                 on_log_message: Callable[[str, int, bytes], None] | None = None) -> None:
         self.request = request
+        self.on_log_message = on_log_message  # every log message as written: see LogWriter's listener
         self.clock = clock or ScaledClock(request.settings.session.time_scale)
         self.status = SessionStatus(len(request.plan))
         self.on_update = on_update or (lambda status: None)
@@ -178,7 +180,7 @@ class Session:
         }}
         completed = 0
         with LogWriter(request.log_path, metadata=metadata, flush_interval_s=request.settings.session.flush_interval_s,
-                       overwrite=request.overwrite_log) as log:
+                       overwrite=request.overwrite_log, listener=self.on_log_message) as log:
             self._log = log
             self._write_parameters()
             for warning in request.warnings:

@@ -17,6 +17,7 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import msgspec
 import numpy as np
@@ -31,7 +32,11 @@ from . import render
 from .common import add_model_arguments, check_seed
 from .next_steps import command
 
+if TYPE_CHECKING:
+    from ..bench.foxglove_live import FoxgloveLive
+
 DEFAULT_LOG_DIR = Path("sessions")
+FOXGLOVE_PORT = 8765  # Foxglove's and Lichtblick's default for a WebSocket connection
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -53,10 +58,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, help="digital twin noise seed (default: the profile's)")
     parser.add_argument("--report", type=Path, metavar="DIR", help="write the session's figures to this folder")
     parser.add_argument("--no-live", action="store_true", help="no live view (plain progress lines)")
+    parser.add_argument("--foxglove", nargs="?", const=str(FOXGLOVE_PORT), metavar="[HOST:]PORT",
+                        help="stream the session to Foxglove or Lichtblick over their WebSocket protocol on "
+                             f"ws://HOST:PORT (default 127.0.0.1:{FOXGLOVE_PORT}; port 0: any free one, printed; "
+                             "the server has no authentication: another HOST opens the session to that network)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    # The server first: a taken port stops the command before a log file is reserved.
+    with _foxglove(args.foxglove) as server:
+        return _run(args, server)
+
+
+def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
     from ..bench.plan_choice import choose_plan
     from ..bench.session import SessionRequest
 
@@ -102,8 +117,11 @@ def run(args: argparse.Namespace) -> int:
                   f"log {render.plain(log_path)}", highlight=False)
     if clipped_warning:
         console.print(f"[yellow]warning:[/] {clipped_warning}")
+    if server is not None:
+        console.print(f"Foxglove: open a connection to {server.url} (layout: docs/foxglove/hydrojet.json)",
+                      highlight=False, markup=False)
     result = asyncio.run(_run_session(request, console, live=not args.no_live and console.is_terminal,
-                                      clipped=frozenset(clipped)))
+                                      clipped=frozenset(clipped), on_log_message=server and server.publish))
     if result is None:
         console.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
         return 143
@@ -120,7 +138,19 @@ def _clipped_warning(clipped: tuple[int, ...], limits: tuple[float, ...]) -> str
             "at the clipped force")
 
 
-async def _run_session(request, console: Console, live: bool, clipped: frozenset[int]):
+def _foxglove(address: str | None) -> contextlib.AbstractContextManager:
+    """The live Foxglove server of ``--foxglove [HOST:]PORT`` (None without the option)."""
+    if address is None:
+        return contextlib.nullcontext()
+    from ..bench.foxglove_live import LOOPBACK, FoxgloveLive
+
+    host, _, port = address.rpartition(":")
+    if not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise UserError(f"--foxglove {address}: expected [HOST:]PORT, a port 0 to 65535")
+    return FoxgloveLive(int(port), host or LOOPBACK)
+
+
+async def _run_session(request, console: Console, live: bool, clipped: frozenset[int], on_log_message=None):
     from ..bench.live_view import LiveView
     from ..bench.session import Session
 
@@ -139,7 +169,7 @@ async def _run_session(request, console: Console, live: bool, clipped: frozenset
     try:
         with view_context as view:
             on_update = view.update if live else _printer(console, clipped)
-            session = Session(request, on_update=on_update)
+            session = Session(request, on_update=on_update, on_log_message=on_log_message)
             return await session.run()
     except asyncio.CancelledError:
         if terminated:

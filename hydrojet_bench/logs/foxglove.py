@@ -1,7 +1,10 @@
 """Foxglove's ``foxglove.FrameTransform`` and ``foxglove.SceneUpdate`` messages, as log records.
 
-Field names and types follow Foxglove's public JSON schemas (for the fields the bench
-uses, plus the bench's ``t_s``), so a log opens in Foxglove's or Lichtblick's 3D panel.
+Field names and types are those of Foxglove's definitions (all fields, plus the bench's
+``t_s``; tests/logs/foxglove_check.py checks them against the ones the Foxglove SDK
+ships), so a log opens in Foxglove's or Lichtblick's 3D panel. Kept as msgspec types
+rather than the SDK's message classes: those encode protobuf only and cannot be read
+back, and the log's reader turns every message into a typed record.
 Their quaternions are Foxglove's ``{x, y, z, w}`` objects, not the bench's (w, x, y, z).
 """
 
@@ -92,8 +95,74 @@ class LinePrimitive(Struct, frozen=True):
     indices: Annotated[tuple[Annotated[int, Meta(ge=0)], ...], Meta(description="empty: no indexing")]
 
 
-class OtherPrimitive(Struct, frozen=True):
-    """A kind of primitive the bench never writes; its fields are not read."""
+class ArrowPrimitive(Struct, frozen=True):
+    """An arrow along the pose's +x, tail at its position (m)."""
+
+    pose: Pose
+    shaft_length: float
+    shaft_diameter: float
+    head_length: float
+    head_diameter: float
+    color: Color
+
+
+class CubePrimitive(Struct, frozen=True):
+    """A box centred on the pose, ``size`` its edges (m)."""
+
+    pose: Pose
+    size: Vector3
+    color: Color
+
+
+class SpherePrimitive(Struct, frozen=True):
+    """An ellipsoid centred on the pose, ``size`` its diameters (m)."""
+
+    pose: Pose
+    size: Vector3
+    color: Color
+
+
+class CylinderPrimitive(Struct, frozen=True):
+    """A cylinder or truncated cone along the pose's z, ``size`` its bounding box (m)."""
+
+    pose: Pose
+    size: Vector3
+    bottom_scale: float
+    top_scale: float
+    color: Color
+
+
+class TriangleListPrimitive(Struct, frozen=True):
+    """Triangles, three points each."""
+
+    pose: Pose
+    points: tuple[Point3, ...]
+    color: Color
+    colors: tuple[Color, ...]
+    indices: tuple[Annotated[int, Meta(ge=0)], ...]
+
+
+class TextPrimitive(Struct, frozen=True):
+    """A text label."""
+
+    pose: Pose
+    billboard: bool
+    font_size: float
+    scale_invariant: bool
+    color: Color
+    text: str
+
+
+class ModelPrimitive(Struct, frozen=True):
+    """A 3D model from a URL or embedded data (base64)."""
+
+    pose: Pose
+    scale: Vector3
+    color: Color
+    override_color: bool
+    url: str
+    media_type: str
+    data: str
 
 
 class SceneEntity(Struct, frozen=True, kw_only=True):
@@ -105,14 +174,14 @@ class SceneEntity(Struct, frozen=True, kw_only=True):
     lifetime: Duration
     frame_locked: Annotated[bool, Meta(description="follow frame_id as it moves")]
     metadata: tuple[KeyValuePair, ...] = ()
-    arrows: tuple[OtherPrimitive, ...] = ()
-    cubes: tuple[OtherPrimitive, ...] = ()
-    spheres: tuple[OtherPrimitive, ...] = ()
-    cylinders: tuple[OtherPrimitive, ...] = ()
+    arrows: tuple[ArrowPrimitive, ...] = ()
+    cubes: tuple[CubePrimitive, ...] = ()
+    spheres: tuple[SpherePrimitive, ...] = ()
+    cylinders: tuple[CylinderPrimitive, ...] = ()
     lines: tuple[LinePrimitive, ...] = ()
-    triangles: tuple[OtherPrimitive, ...] = ()
-    texts: tuple[OtherPrimitive, ...] = ()
-    models: tuple[OtherPrimitive, ...] = ()
+    triangles: tuple[TriangleListPrimitive, ...] = ()
+    texts: tuple[TextPrimitive, ...] = ()
+    models: tuple[ModelPrimitive, ...] = ()
 
 
 class SceneEntityDeletion(Struct, frozen=True):

@@ -36,6 +36,11 @@ def topic_schema(record_type: type[LogRecord]) -> JsonSchema:
     return msgspec.json.decode(msgspec.json.encode({**schema, "title": schema_name(record_type)}))  # () -> []
 
 
+def topic_schema_json(record_type: type[LogRecord]) -> bytes:
+    """`topic_schema` as the JSON bytes a log (or a live Foxglove channel) registers."""
+    return msgspec.json.encode(topic_schema(record_type))
+
+
 def _viewer_form(node: JsonSchema, defs: dict[str, JsonSchema]) -> JsonSchema:
     """``node`` with references inlined, nullable fields annotated and enums typed."""
     if "$ref" in node:

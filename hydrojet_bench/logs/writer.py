@@ -14,7 +14,7 @@ with its first message) and the messages. `close` adds the summary and footer.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -32,7 +32,7 @@ from .format import FORMAT_VERSION, LOG_METADATA_NAME, MESSAGE_ENCODING, SCHEMA_
 from .foxglove import (LINE_STRIP, Color, Duration, FrameTransform, LinePrimitive, Point3, Pose, Quaternion,
                        SceneEntity, SceneUpdate, Time, Vector3)
 from .log_record import LogRecord
-from .schemas import schema_name, topic_schema
+from .schemas import schema_name, topic_schema_json
 from .topics import TOPICS
 
 LIBRARY = f"hydrojet-bench {__version__}; {LIBRARY_IDENTIFIER}"
@@ -56,6 +56,8 @@ class LogWriter:
     flush_interval_s: wall time between automatic flushes, s.
     overwrite: replace an existing file (the user's ``--overwrite``, or a file this
         process reserved with `hydrojet_bench.files.create_numbered`).
+    listener: called with (topic, log time in ns since the Unix epoch, JSON bytes) for
+        every message written, e.g. to stream the session live.
 
     `write` raises ValueError for a record that is not of a topic's type or that its
     topic's reader would refuse (e.g. NaN where null is not allowed), naming the field.
@@ -63,7 +65,7 @@ class LogWriter:
 
     def __init__(self, path: str | Path, metadata: Mapping[str, Mapping[str, str]] | None = None,
                  start_time_unix_s: float | None = None, flush_interval_s: float = 1.0, *,
-                 overwrite: bool = False) -> None:
+                 overwrite: bool = False, listener: Callable[[str, int, bytes], None] | None = None) -> None:
         if not flush_interval_s > 0:
             raise ValueError(f"flush_interval_s must be > 0 s, got {flush_interval_s!r}")
         records = _checked_metadata(metadata or {})
@@ -83,6 +85,7 @@ class LogWriter:
         for name, values in records.items():
             self._writer.add_metadata(name, values)
         self._channels: dict[str, int] = {}
+        self._listener = listener
         self._sequence: dict[int, int] = {}
         self._closed = False
         self.flush()
@@ -176,12 +179,14 @@ class LogWriter:
         if channel is None:
             record_type = TOPICS[topic]
             schema_id = self._writer.register_schema(schema_name(record_type), SCHEMA_ENCODING,
-                                                     msgspec.json.encode(topic_schema(record_type)))
+                                                     topic_schema_json(record_type))
             channel = self._channels[topic] = self._writer.register_channel(topic, MESSAGE_ENCODING, schema_id)
             self._sequence[channel] = 0
         sequence = self._sequence[channel]
         self._sequence[channel] = (sequence + 1) & 0xFFFFFFFF
         self._writer.add_message(channel, log_time=log_time, data=data, publish_time=log_time, sequence=sequence)
+        if self._listener is not None:
+            self._listener(topic, log_time, data)
         if time.monotonic() - self._last_flush >= self.flush_interval_s:
             self.flush()
 
