@@ -109,9 +109,9 @@ class OnlineDisturbanceEstimator:
         error_before = error = self._error_deg(solution, measured, omega)
         done = 0
         while done < budget and error > self.settings.tolerance_deg:
-            seed = self.model.with_accurate_jacobian(solution, prepared)
             steps = DEFAULT_RELATIVE_STEP * np.maximum(np.abs(self._moment), _MOMENT_SCALES)
-            matrix = disturbance_columns(self.model, prepared, seed, _MOMENT_COMPONENTS, steps)[3:]
+            columns, seed = disturbance_columns(self.model, prepared, solution, _MOMENT_COMPONENTS, steps)
+            matrix = columns[3:]
             gram = matrix @ matrix.T
             mu = self.settings.damping * np.linalg.eigvalsh(gram)[-1]
             # omega_des is in the tip sensor's frame; the sensitivity in the rod tip's.

@@ -286,28 +286,24 @@ class ShootingModel:
 
     def with_accurate_jacobian(self, solution: Solution, prepared: PreparedProblem) -> Solution:
         """The same solution carrying a finite-difference Jacobian at its own tip
-        orientation (three extra shots) instead of the Broyden estimate, so that solves of
-        nearby problems seeded from it converge in one step: what a sensitivity wants."""
-        jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
-        kernels.jacobian_at(self.kind, self.resolution, solution.tip_rotation_in_base, prepared.profile,
-                            prepared.tip, prepared.base, prepared.beta, jacobian)
-        return replace(solution, jacobian=jacobian)
+        orientation (four extra shots) instead of the Broyden estimate, so that solves of
+        nearby problems seeded from it converge in fewer steps."""
+        return self.tip_wrench_columns(prepared, solution, _NO_COMPONENTS, _NO_STEPS)[1]
 
-    def tip_wrench_columns(self, prepared: PreparedProblem, seed: Solution, components: np.ndarray,
-                           steps: np.ndarray) -> np.ndarray:
+    def tip_wrench_columns(self, prepared: PreparedProblem, nominal: Solution, components: np.ndarray,
+                           steps: np.ndarray) -> tuple[np.ndarray, Solution]:
         """(6, k) tip twists per nondimensional step of tip follower wrench components
-        (0-2 force, 3-5 moment), solved from ``seed`` (which should carry an accurate
-        Jacobian, see `with_accurate_jacobian`). Used by `sensitivity`."""
-        work = _Workspace(len(prepared.node_arc_length_m))
+        (0-2 force, 3-5 moment) at the converged ``nominal`` solution of ``prepared``, in
+        one kernel call (`kernels.tip_wrench_sensitivity`), and ``nominal`` carrying the
+        accurate Jacobian computed on the way. Used by `sensitivity`."""
+        jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
         columns = np.empty((6, len(components)))
-        kernels.tip_wrench_sensitivity(self.kind, self.resolution, seed.tip_rotation_in_base,
-                                       seed.tip_position_in_base_m, seed.jacobian,
-                                       prepared.profile, prepared.tip, prepared.base, prepared.beta, self.tolerance,
-                                       self.max_iterations, components, steps, prepared.length_m, work.nodes_p,
-                                       work.nodes_r, columns, work.info)
-        if work.info[0] != kernels.CONVERGED:
-            raise ConvergenceError(f"{self.name} model did not converge for a perturbed disturbance wrench")
-        return columns
+        if not kernels.tip_wrench_sensitivity(self.kind, self.resolution, nominal.tip_rotation_in_base,
+                                              prepared.profile, prepared.tip, prepared.base, prepared.beta,
+                                              components, steps, prepared.length_m, jacobian, columns):
+            raise ConvergenceError(f"{self.name} model: the shooting Jacobian is singular or a shot diverged "
+                                   "at this solution; no sensitivity")
+        return columns, replace(nominal, jacobian=jacobian)
 
     def _ramp(self, prepared: PreparedProblem, stages: int, work: "_Workspace") -> Solution | None:
         """Continuation: scale every load from 1/stages up to 1, each stage seeded by the last."""
@@ -355,6 +351,8 @@ class ShootingModel:
 
 _NO_ROTATION = np.zeros(3)
 _NO_ROTATION.flags.writeable = False
+_NO_COMPONENTS = np.zeros(0, dtype=np.int64)
+_NO_STEPS = np.zeros(0)
 
 
 class _Workspace:
