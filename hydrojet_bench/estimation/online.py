@@ -116,10 +116,11 @@ class OnlineDisturbanceEstimator:
             mu = self.settings.damping * np.linalg.eigvalsh(gram)[-1]
             # omega_des is in the tip sensor's frame; the sensitivity in the rod tip's.
             omega_tip = solution.tip_sensor_mounting @ omega
-            self._moment = self._moment + self.settings.gain * matrix.T @ np.linalg.solve(
-                gram + mu * np.eye(3), omega_tip)
+            change = self.settings.gain * matrix.T @ np.linalg.solve(gram + mu * np.eye(3), omega_tip)
+            self._moment = self._moment + change
             prepared = packed.with_disturbance_moment(self._moment)
-            solution = self.model.solve_prepared(prepared, seed)
+            # The same columns predict where the tip turns: the solve starts there.
+            solution = self.model.solve_prepared(prepared, seed, predicted_tip_turn_rad=matrix @ change)
             error = self._error_deg(solution, measured, omega)
             done += 1
         self._previous = solution

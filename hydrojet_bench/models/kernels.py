@@ -462,6 +462,14 @@ def _reanchor(reference, x, work, scratch):
 
 
 @njit(cache=True)
+def turned(rotation, rotation_vector):
+    """rotation exp(rotation_vector), as a new matrix: a rotation turned in its own frame."""
+    out = rotation.copy()
+    _reanchor(out, rotation_vector, np.empty((3, 3)), np.empty((3, 3)))
+    return out
+
+
+@njit(cache=True)
 def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, base, beta, load_scale,
           tolerance, max_iterations, nodes_p, nodes_r, clamp_state, info):
     """Damped quasi-Newton on the shooting residual; the unknown is a small rotation of

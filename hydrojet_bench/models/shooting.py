@@ -262,11 +262,15 @@ class ShootingModel:
         prepared = self.prepare(jet_forces_n, params, previous)
         return self.solve_prepared(prepared, warm_start if warm_start is not None else previous)
 
-    def solve_prepared(self, prepared: PreparedProblem, warm_start: Solution | None = None) -> Solution:
-        """Solve a packed problem; see `solve`."""
+    def solve_prepared(self, prepared: PreparedProblem, warm_start: Solution | None = None,
+                       predicted_tip_turn_rad: np.ndarray | None = None) -> Solution:
+        """Solve a packed problem; see `solve`. ``predicted_tip_turn_rad``: how far the tip
+        is expected to turn from ``warm_start``'s (a rotation vector in its tip frame, from
+        a sensitivity): the solver then starts there, with ``warm_start``'s Jacobian."""
         work = _Workspace(len(prepared.node_arc_length_m))
         if warm_start is not None and warm_start.jacobian.shape == (kernels.UNKNOWNS, kernels.UNKNOWNS):
-            reference = warm_start.tip_rotation_in_base.copy()
+            reference = (warm_start.tip_rotation_in_base.copy() if predicted_tip_turn_rad is None
+                         else kernels.turned(warm_start.tip_rotation_in_base, predicted_tip_turn_rad))
             jacobian = warm_start.jacobian.copy()
             if self._run(prepared, reference, jacobian, True, 1.0, work):
                 return self._solution(prepared, jacobian, work)
@@ -283,12 +287,6 @@ class ShootingModel:
             f"{self.name} model did not converge for jet forces "
             f"{prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].tolist()} N (residual {work.info[2]:.3g} "
             f"after a direct solve and load ramping in up to {RAMP_SCHEDULES[-1]} stages)")
-
-    def with_accurate_jacobian(self, solution: Solution, prepared: PreparedProblem) -> Solution:
-        """The same solution carrying a finite-difference Jacobian at its own tip
-        orientation (four extra shots) instead of the Broyden estimate, so that solves of
-        nearby problems seeded from it converge in fewer steps."""
-        return self.tip_wrench_columns(prepared, solution, _NO_COMPONENTS, _NO_STEPS)[1]
 
     def tip_wrench_columns(self, prepared: PreparedProblem, nominal: Solution, components: np.ndarray,
                            steps: np.ndarray) -> tuple[np.ndarray, Solution]:
@@ -351,8 +349,6 @@ class ShootingModel:
 
 _NO_ROTATION = np.zeros(3)
 _NO_ROTATION.flags.writeable = False
-_NO_COMPONENTS = np.zeros(0, dtype=np.int64)
-_NO_STEPS = np.zeros(0)
 
 
 class _Workspace:
