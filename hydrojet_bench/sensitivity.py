@@ -42,7 +42,9 @@ DEFAULT_RELATIVE_STEP = 1e-4
 @dataclass(frozen=True)
 class Sensitivity:
     """matrix: (6, k) tip twist (v in m, omega in rad, tip frame) per unit of each parameter.
-    names: the parameters, in column order. steps: the finite-difference step of each."""
+    names: the parameters, in column order. steps: the finite-difference step of each.
+    nominal: the nominal solution, carrying an accurate Jacobian: the best seed for
+    solves of nearby problems."""
 
     matrix: np.ndarray
     names: tuple[str, ...]
@@ -138,4 +140,4 @@ def sensitivity(model: ShootingModel, jet_forces_n: Sequence[float], params: Mod
                 solution = model.solve(jet_forces_n, perturbed, previous=previous, warm_start=seed)
             twists.append(tip_twist(nominal, solution))
         columns[:, column] = (twists[0] - twists[1]) / (2 * step) if central else twists[0] / step
-    return Sensitivity(columns, tuple(names), steps, nominal)
+    return Sensitivity(columns, tuple(names), steps, seed)
