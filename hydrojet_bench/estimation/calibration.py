@@ -147,6 +147,10 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
     offsets = np.array([poses[index].position_offset_in_tip_m or (0.0, 0.0, 0.0) for index in fitted_indices])
     disturbance_columns = [column for column, name in enumerate(names) if name in DISTURBANCE_NAMES]
     cache: dict[bytes, tuple[np.ndarray, list[Solution], list[ModelParameters]]] = {}
+    # Each pose's solution at the last evaluated parameters: the optimiser moves them a
+    # little per evaluation, so they seed the next solves far better than the previous
+    # pose (other jet forces) does.
+    last: list[Solution | None] = [None] * len(poses)
 
     def parameters_at(x: np.ndarray) -> list[ModelParameters]:
         fitted_params = with_parameters(initial, dict(zip(names, x)))
@@ -173,10 +177,12 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
             previous: Solution | None = None
             for index, pose in enumerate(poses):
                 if follow_path:
-                    previous = model.solve(pose.jet_forces_n, params[index], previous=previous)
+                    previous = model.solve(pose.jet_forces_n, params[index], previous=previous,
+                                           warm_start=last[index])
                 else:
-                    previous = model.solve(pose.jet_forces_n, params[index], warm_start=previous)
+                    previous = model.solve(pose.jet_forces_n, params[index], warm_start=last[index] or previous)
                 solutions.append(previous)
+            last[:] = solutions
             residuals = residual_rows([solutions[index] for index in fitted_indices]).ravel()
             cache[key] = (residuals, solutions, params)
         return cache[key]
