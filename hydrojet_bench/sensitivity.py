@@ -16,6 +16,11 @@ magnitude, or its typical scale when the parameter is zero (a disturbance usuall
 starts at zero): every column then keeps four significant digits.
 ``tests/test_sensitivity.py`` checks the agreement across steps and the noise floor
 below them. Central differences (two solves per column) are available for checks.
+
+The w_d columns are not differences of solves: w_d enters only the tip wrench, so
+`ShootingModel.tip_wrench_columns` gets them by the implicit function theorem from
+single shots at the nominal tip orientation (no solver noise; the step then only sets
+the truncation error).
 """
 
 from __future__ import annotations
@@ -37,7 +42,9 @@ DEFAULT_RELATIVE_STEP = 1e-4
 @dataclass(frozen=True)
 class Sensitivity:
     """matrix: (6, k) tip twist (v in m, omega in rad, tip frame) per unit of each parameter.
-    names: the parameters, in column order. steps: the finite-difference step of each."""
+    names: the parameters, in column order. steps: the finite-difference step of each.
+    nominal: the nominal solution, carrying an accurate Jacobian: the best seed for
+    solves of nearby problems."""
 
     matrix: np.ndarray
     names: tuple[str, ...]
@@ -80,13 +87,14 @@ def tip_twist(nominal: Solution, perturbed: Solution) -> np.ndarray:
     return twist
 
 
-def disturbance_columns(model: ShootingModel, prepared: PreparedProblem, seed: Solution,
-                        components: np.ndarray, steps: np.ndarray) -> np.ndarray:
+def disturbance_columns(model: ShootingModel, prepared: PreparedProblem, nominal: Solution,
+                        components: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, Solution]:
     """(6, k) sensitivity columns for w_d components (0-2 force in N, 3-5 moment in N m)
-    with the given steps, on an already packed problem. ``seed`` is the nominal solution
-    of ``prepared`` carrying an accurate Jacobian (`ShootingModel.with_accurate_jacobian`)."""
+    with the given steps, on an already packed problem whose solution is ``nominal``;
+    and ``nominal`` carrying an accurate Jacobian, the seed for nearby solves."""
     unit = np.where(components < 3, prepared.force_scale_n, prepared.moment_scale_nm)
-    return model.tip_wrench_columns(prepared, seed, components, steps / unit) / unit
+    columns, seed = model.tip_wrench_columns(prepared, nominal, components, steps / unit)
+    return columns / unit, seed
 
 
 def sensitivity(model: ShootingModel, jet_forces_n: Sequence[float], params: ModelParameters,
@@ -103,7 +111,6 @@ def sensitivity(model: ShootingModel, jet_forces_n: Sequence[float], params: Mod
     prepared = model.prepare(jet_forces_n, params, previous)
     if nominal is None:
         nominal = model.solve_prepared(prepared, previous)
-    seed = model.with_accurate_jacobian(nominal, prepared)
     columns = np.empty((6, len(names)))
     steps = np.empty(len(names))
     for column, name in enumerate(names):
@@ -111,12 +118,12 @@ def sensitivity(model: ShootingModel, jet_forces_n: Sequence[float], params: Mod
         known = effect_parameter(model, name)
         value = get_parameter(params, name, known.default if known else None)
         steps[column] = relative_step * max(abs(value), scale)
-    # w_d only enters the tip wrench: its forward-difference columns are solved in one
-    # kernel call on the packed problem (the online estimator's hot path).
+    # w_d only enters the tip wrench: its columns come from one kernel call on the packed
+    # problem, by the implicit function theorem (the online estimator's hot path). The
+    # same call gives ``nominal`` an accurate Jacobian: the seed of every other solve.
     batched = [column for column, name in enumerate(names) if name in DISTURBANCE_NAMES and not central]
-    if batched:
-        components = np.array([DISTURBANCE_NAMES.index(names[c]) for c in batched], dtype=np.int64)
-        columns[:, batched] = disturbance_columns(model, prepared, seed, components, steps[batched])
+    components = np.array([DISTURBANCE_NAMES.index(names[c]) for c in batched], dtype=np.int64)
+    columns[:, batched], seed = disturbance_columns(model, prepared, nominal, components, steps[batched])
     for column, name in enumerate(names):
         if column in batched:
             continue
@@ -133,4 +140,4 @@ def sensitivity(model: ShootingModel, jet_forces_n: Sequence[float], params: Mod
                 solution = model.solve(jet_forces_n, perturbed, previous=previous, warm_start=seed)
             twists.append(tip_twist(nominal, solution))
         columns[:, column] = (twists[0] - twists[1]) / (2 * step) if central else twists[0] / step
-    return Sensitivity(columns, tuple(names), steps, nominal)
+    return Sensitivity(columns, tuple(names), steps, seed)

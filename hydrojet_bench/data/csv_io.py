@@ -47,9 +47,12 @@ same dataset back.
 
 from __future__ import annotations
 
+import array
 import csv
-from collections.abc import Callable
+import itertools
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
@@ -117,64 +120,30 @@ def _parse_header(fields: list[str], where: str) -> list[str]:
 
 
 def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
-    """Read a measurement table following the contract above (see the module docstring)."""
+    """Read a measurement table following the contract above (see the module docstring).
+
+    The file is streamed in blocks of rows, each parsed to numbers before the next is
+    read: holding every cell as a Python string at once cost ~8x the file's size."""
     path = Path(path)
     name = str(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as error:
-        raise UserError(f"{name}: not UTF-8 text (byte {error.start}): is it really a CSV file?") from None
+        with path.open(encoding="utf-8-sig") as handle:
+            values, columns, line_numbers = _read_columns(handle, name)
+    except UnicodeDecodeError:
+        raise UserError(f"{name}: not UTF-8 text (byte {_first_undecodable_byte(path)}): "
+                        "is it really a CSV file?") from None
     except OSError as error:
         raise UserError(f"{name}: cannot read: {error.strerror or error}") from None
-    # read_text has already turned \r\n and \r into \n; splitting on \n alone (not
-    # splitlines, which also breaks at form feeds and the like) keeps editors' line numbers.
-    lines = text.split("\n")
-
-    header_index = next((i for i, line in enumerate(lines) if line.strip() and not _is_comment(line)), None)
-    if header_index is None:
-        raise UserError(f"{name}: no header row; expected a line naming the columns "
-                        f"({', '.join(REQUIRED_COLUMNS)}, ...)")
-    header_line = header_index + 1
-    columns = _parse_header(next(csv.reader([lines[header_index]])), f"{name}, line {header_line}")
-    width = len(columns)
-
-    cells: list[list[str]] = []
-    line_numbers: list[int] = []
-    for offset, line in enumerate(lines[header_index + 1:]):
-        number = header_line + 1 + offset
-        if not line.strip():
-            continue
-        if _is_comment(line):
-            raise UserError(f"{name}, line {number}: comment lines (#) are only allowed before the header row")
-        # Plain numbers need no CSV quoting rules; a quoted cell takes the csv module.
-        fields = line.split(",") if '"' not in line else next(csv.reader([line]))
-        if len(fields) < width:
-            raise UserError(f"{name}, line {number}, column {columns[len(fields)]}: missing (the row has "
-                            f"{len(fields)} fields, the header {width} columns)")
-        if len(fields) > width:
-            raise UserError(f"{name}, line {number}, column {width + 1}: the row has {len(fields)} fields "
-                            f"but the header names only {width} columns")
-        cells.append(fields)
-        line_numbers.append(number)
-    if not cells:
-        raise UserError(f"{name}: the header (line {header_line}) is followed by no data rows")
-
-    by_column = dict(zip(columns, zip(*cells)))
     order = {column: i for i, column in enumerate(columns)}
 
     def where(row: int, column: str) -> str:
         return f"{name}, line {line_numbers[row]}, column {column}"
 
-    problem = _Problem()
-    values: dict[str, np.ndarray] = {}
-    for column in columns:
-        array = _parse_numbers(by_column[column], column, problem, order[column], where,
-                               integer=column in LABEL_COLUMNS)
-        if array is not None:
-            values[column] = array
-    if problem.key is not None:
-        raise UserError(problem.message)
+    def cell(row: int, column: str) -> str:
+        """The cell's text as written (messages quote it): read again, only for a message."""
+        return _fields(_line(path, line_numbers[row]))[order[column]].strip()
 
+    problem = _Problem()
     # Checks on whole rows, again reporting the earliest.
     forces = np.column_stack([values["q1"], values["q2"], values["q3"]])
     for j, column in enumerate(("q1", "q2", "q3")):
@@ -182,7 +151,7 @@ def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
         if len(negative):
             i = int(negative[0])
             problem.offer(i, order[column], f"{where(i, column)}: jet force must be >= 0 N (a jet cannot "
-                                            f"pull), got {by_column[column][i].strip()}")
+                                            f"pull), got {cell(i, column)}")
     orientations = {}
     for sensor, quaternion_columns in _QUATERNIONS.items():
         q = np.column_stack([values[c] for c in quaternion_columns])
@@ -199,18 +168,18 @@ def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
     backwards = np.flatnonzero(np.diff(time) < 0.0)
     if len(backwards):
         i = int(backwards[0]) + 1
-        problem.offer(i, order["t"], f"{where(i, 't')}: time goes backwards ({by_column['t'][i].strip()} s "
-                                     f"after {by_column['t'][i - 1].strip()} s on line {line_numbers[i - 1]})")
+        problem.offer(i, order["t"], f"{where(i, 't')}: time goes backwards ({cell(i, 't')} s "
+                                     f"after {cell(i - 1, 't')} s on line {line_numbers[i - 1]})")
     if "sweep" in values:
         low = np.flatnonzero(values["sweep"] < -1)
         if len(low):
             i = int(low[0])
             problem.offer(i, order["sweep"], f"{where(i, 'sweep')}: must be >= 0, or -1 for calibration or "
-                                             f"unlabelled rows, got {by_column['sweep'][i].strip()}")
+                                             f"unlabelled rows, got {cell(i, 'sweep')}")
     if problem.key is not None:
         raise UserError(problem.message)
 
-    rows = len(cells)
+    rows = len(time)
     sweep = values.get("sweep", np.full(rows, -1, dtype=np.int64))
     step = values["step"] if "step" in values else steps_from_runs(sweep, forces)
     positions = {sensor: (np.column_stack([values[c] for c in triplet]) if triplet[0] in values else None)
@@ -227,14 +196,112 @@ def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
         raise UserError(f"{name}: {error}") from None
 
 
+# Rows parsed per block: big enough that numpy's per-call cost vanishes, small enough
+# that the block's strings (~60 bytes a cell) stay a few MB.
+_BLOCK_ROWS = 8192
+
+
+def _fields(line: str) -> list[str]:
+    # Plain numbers need no CSV quoting rules; a quoted cell takes the csv module.
+    return line.split(",") if '"' not in line else next(csv.reader([line]))
+
+
+def _lines(handle: TextIO) -> Iterator[str]:
+    """The file's lines without their newline. Text mode has already turned \\r\\n and \\r
+    into \\n, and only \\n ends a line (not form feeds and the like, as splitlines
+    would), so the numbers match editors' line numbers."""
+    for line in handle:
+        yield line[:-1] if line.endswith("\n") else line
+
+
+def _line(path: Path, number: int) -> str:
+    """Line ``number`` (1-based) of the file."""
+    with path.open(encoding="utf-8-sig") as handle:
+        return next(itertools.islice(_lines(handle), number - 1, None))
+
+
+def _first_undecodable_byte(path: Path) -> int:
+    try:
+        path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        return error.start
+    raise AssertionError("a decoding error that decoding the whole file does not repeat")  # pragma: no cover
+
+
+def _read_columns(handle: TextIO, name: str) -> tuple[dict[str, np.ndarray], list[str], np.ndarray]:
+    """Header and cells, checked and parsed block by block. Returns the numeric columns,
+    the header's column names and each data row's line number. Structural problems
+    (comments after the header, wrong field counts) raise at once, wherever they are;
+    number problems are collected and the earliest raised once every row was checked."""
+    lines = _lines(handle)
+    header_line = 0
+    header = None
+    for header_line, line in enumerate(lines, start=1):
+        if line.strip() and not _is_comment(line):
+            header = line
+            break
+    if header is None:
+        raise UserError(f"{name}: no header row; expected a line naming the columns "
+                        f"({', '.join(REQUIRED_COLUMNS)}, ...)")
+    columns = _parse_header(next(csv.reader([header])), f"{name}, line {header_line}")
+    width = len(columns)
+    integer = [column in LABEL_COLUMNS for column in columns]
+    line_numbers = array.array("q")
+    blocks: list[list[np.ndarray]] = [[] for _ in columns]
+    problem = _Problem()
+
+    def where(row: int, column: str) -> str:
+        return f"{name}, line {line_numbers[row]}, column {column}"
+
+    block: list[list[str]] = []
+    first_row = 0
+
+    def parse_block() -> None:
+        # After a problem only the structure is still checked: later rows cannot hold an
+        # earlier problem.
+        if problem.key is None:
+            for j, strings in enumerate(zip(*block)):
+                parsed = _parse_numbers(strings, columns[j], problem, j, where, first_row, integer=integer[j])
+                if parsed is not None:
+                    blocks[j].append(parsed)
+
+    for number, line in enumerate(lines, start=header_line + 1):
+        if not line.strip():
+            continue
+        if _is_comment(line):
+            raise UserError(f"{name}, line {number}: comment lines (#) are only allowed before the header row")
+        fields = _fields(line)
+        if len(fields) < width:
+            raise UserError(f"{name}, line {number}, column {columns[len(fields)]}: missing (the row has "
+                            f"{len(fields)} fields, the header {width} columns)")
+        if len(fields) > width:
+            raise UserError(f"{name}, line {number}, column {width + 1}: the row has {len(fields)} fields "
+                            f"but the header names only {width} columns")
+        block.append(fields)
+        line_numbers.append(number)
+        if len(block) == _BLOCK_ROWS:
+            parse_block()
+            first_row += len(block)
+            block = []
+    if block:
+        parse_block()
+    if not line_numbers:
+        raise UserError(f"{name}: the header (line {header_line}) is followed by no data rows")
+    if problem.key is not None:
+        raise UserError(problem.message)
+    values = {column: np.concatenate(parts) for column, parts in zip(columns, blocks)}
+    return values, columns, np.frombuffer(line_numbers, dtype=np.int64)
+
+
 def _parse_numbers(strings: tuple[str, ...], column: str, problem: _Problem, column_order: int,
-                   where: Callable[[int, str], str], *, integer: bool) -> np.ndarray | None:
-    """One column's cells as numbers; problems go to ``problem`` (None returned)."""
+                   where: Callable[[int, str], str], first_row: int, *, integer: bool) -> np.ndarray | None:
+    """One block of a column's cells as numbers (``strings[0]`` is row ``first_row``);
+    problems go to ``problem`` (None returned)."""
     if "_" in "".join(strings):
         # float() reads "1_000" as 1000: a digit-group separator is more likely a typo
         # (a merged cell, a mistyped decimal point) than data, so refuse it.
         i = next(i for i, text in enumerate(strings) if "_" in text)
-        problem.offer(i, column_order, f"{where(i, column)}: {strings[i].strip()!r} is not a number "
+        problem.offer(first_row + i, column_order, f"{where(first_row + i, column)}: {strings[i].strip()!r} is not a number "
                                        "(no '_' separators)")
         return None
     try:
@@ -245,25 +312,25 @@ def _parse_numbers(strings: tuple[str, ...], column: str, problem: _Problem, col
         for i, text in enumerate(strings):
             cell = text.strip()
             if not cell:
-                problem.offer(i, column_order, f"{where(i, column)}: missing value{_triplet_hint(column)}")
+                problem.offer(first_row + i, column_order, f"{where(first_row + i, column)}: missing value{_triplet_hint(column)}")
                 return None
             try:
                 float(cell)
             except ValueError:
-                problem.offer(i, column_order, f"{where(i, column)}: {cell!r} is not a number")
+                problem.offer(first_row + i, column_order, f"{where(first_row + i, column)}: {cell!r} is not a number")
                 return None
         raise AssertionError("numpy rejected a column that float() accepts")  # pragma: no cover
     bad = np.flatnonzero(~np.isfinite(array))
     if len(bad):
         i = int(bad[0])
-        problem.offer(i, column_order, f"{where(i, column)}: must be a finite number, got {strings[i].strip()}")
+        problem.offer(first_row + i, column_order, f"{where(first_row + i, column)}: must be a finite number, got {strings[i].strip()}")
         return None
     if integer:
         # Labels, not measurements: beyond 2**53 a float no longer holds every integer.
         fractional = np.flatnonzero((array != np.round(array)) | (np.abs(array) > 2.0**53))
         if len(fractional):
             i = int(fractional[0])
-            problem.offer(i, column_order, f"{where(i, column)}: {strings[i].strip()!r} is not an integer")
+            problem.offer(first_row + i, column_order, f"{where(first_row + i, column)}: {strings[i].strip()!r} is not an integer")
             return None
         return array.astype(np.int64)
     return array

@@ -109,17 +109,18 @@ class OnlineDisturbanceEstimator:
         error_before = error = self._error_deg(solution, measured, omega)
         done = 0
         while done < budget and error > self.settings.tolerance_deg:
-            seed = self.model.with_accurate_jacobian(solution, prepared)
             steps = DEFAULT_RELATIVE_STEP * np.maximum(np.abs(self._moment), _MOMENT_SCALES)
-            matrix = disturbance_columns(self.model, prepared, seed, _MOMENT_COMPONENTS, steps)[3:]
+            columns, seed = disturbance_columns(self.model, prepared, solution, _MOMENT_COMPONENTS, steps)
+            matrix = columns[3:]
             gram = matrix @ matrix.T
             mu = self.settings.damping * np.linalg.eigvalsh(gram)[-1]
             # omega_des is in the tip sensor's frame; the sensitivity in the rod tip's.
             omega_tip = solution.tip_sensor_mounting @ omega
-            self._moment = self._moment + self.settings.gain * matrix.T @ np.linalg.solve(
-                gram + mu * np.eye(3), omega_tip)
+            change = self.settings.gain * matrix.T @ np.linalg.solve(gram + mu * np.eye(3), omega_tip)
+            self._moment = self._moment + change
             prepared = packed.with_disturbance_moment(self._moment)
-            solution = self.model.solve_prepared(prepared, seed)
+            # The same columns predict where the tip turns: the solve starts there.
+            solution = self.model.solve_prepared(prepared, seed, predicted_tip_turn_rad=matrix @ change)
             error = self._error_deg(solution, measured, omega)
             done += 1
         self._previous = solution

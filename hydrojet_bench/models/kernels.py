@@ -462,6 +462,14 @@ def _reanchor(reference, x, work, scratch):
 
 
 @njit(cache=True)
+def turned(rotation, rotation_vector):
+    """rotation exp(rotation_vector), as a new matrix: a rotation turned in its own frame."""
+    out = rotation.copy()
+    _reanchor(out, rotation_vector, np.empty((3, 3)), np.empty((3, 3)))
+    return out
+
+
+@njit(cache=True)
 def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, base, beta, load_scale,
           tolerance, max_iterations, nodes_p, nodes_r, clamp_state, info):
     """Damped quasi-Newton on the shooting residual; the unknown is a small rotation of
@@ -560,21 +568,6 @@ def clamp_rotation_vector(moment, base):
 
 
 @njit(cache=True)
-def jacobian_at(kind, resolution, reference, profile, tip, base, beta, jacobian):
-    """Finite-difference Jacobian of the clamp residual at the tip orientation
-    ``reference`` (full load): an accurate matrix for solves near this one."""
-    y = np.empty(18)
-    work = np.empty((3, 3))
-    x = np.zeros(3)
-    r = np.empty(3)
-    nodes_p = np.empty((1, 3))
-    nodes_r = np.empty((1, 3, 3))
-    shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, r, y, work, nodes_p, nodes_r, False)
-    _finite_difference_jacobian(kind, resolution, x, reference, r, profile, tip, base, beta, 1.0,
-                                jacobian, y, work, nodes_p, nodes_r)
-
-
-@njit(cache=True)
 def relative_rotation_vector(rotation_a, rotation_b, out):
     """Rotation vector (rad, in frame a) of R_a^T R_b, through its quaternion so it is
     accurate for small and large angles alike; returns the angle."""
@@ -631,38 +624,69 @@ def body_twist(rotation_a, position_a, rotation_b, position_b, out):
 
 
 @njit(cache=True)
-def tip_wrench_sensitivity(kind, resolution, reference, nominal_position, jacobian, profile, tip, base, beta,
-                           tolerance, max_iterations, components, steps, length, nodes_p, nodes_r, columns, info):
-    """Forward-difference sensitivity of the tip pose to tip follower wrench components
-    (w_d: 0-2 force, 3-5 moment, tip frame), all columns in one call.
+def tip_wrench_sensitivity(kind, resolution, reference, profile, tip, base, beta, components, steps, length,
+                           jacobian, columns):
+    """Sensitivity of the tip pose to tip follower wrench components (w_d: 0-2 force, 3-5
+    moment, tip frame) at the converged tip orientation ``reference``, all columns from
+    3 + k + 1 shots and no solve.
 
-    ``reference``, ``nominal_position`` (in units of ``length``) and ``jacobian``: the
-    nominal tip pose and an accurate Jacobian there. ``steps``: nondimensional step per
-    component. Each column is the body twist (v in units of ``length``, omega) from the
-    nominal tip pose to the perturbed one, divided by the step. ``info[0]`` gets the
-    first failing status, or CONVERGED."""
-    clamp_state = np.empty(18)
-    column_info = np.empty(4)
-    anchor = np.empty((3, 3))
-    trial_jacobian = np.empty((3, 3))
-    twist = np.empty(6)
-    perturbed_position = np.empty(3)
+    By the implicit function theorem the tip rotation moves by dx = -J^-1 dr/dw, where
+    J = dr/dx is the shooting Jacobian and dr/dw the residual's change at a fixed tip
+    orientation; the tip, relative to the clamp, moves by -(dP/dx dx + dP/dw), P the
+    clamp position of a shot started with the tip at the origin. Both partials are
+    forward differences of single shots, which are deterministic to rounding, not of
+    solves, which land anywhere within the solver tolerance. ``steps``: nondimensional
+    step per component. Writes ``jacobian`` (J at ``reference``: an accurate matrix for
+    solves near this one) and ``columns`` (6, k): body twists (v in units of ``length``,
+    omega) per unit of each component. Returns False when J is singular or a shot is not
+    finite."""
+    y = np.empty(18)
+    work = np.empty((3, 3))
+    x = np.zeros(3)
+    r0 = np.empty(3)
+    r = np.empty(3)
+    rotation_rate = np.empty(3)
+    position_rate = np.empty(3)
+    moved = np.empty(3)
+    nodes_p = np.empty((1, 3))
+    nodes_r = np.empty((1, 3, 3))
+    position_by_x = np.empty((3, 3))
+    shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, r0, y, work, nodes_p, nodes_r, False)
+    p0x, p0y, p0z = y[0], y[1], y[2]
+    for j in range(3):
+        # sqrt(machine epsilon): the residual is smooth and evaluated to rounding error.
+        h = 1.5e-8
+        x[j] = h
+        shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, r, y, work, nodes_p, nodes_r, False)
+        x[j] = 0.0
+        for i in range(3):
+            jacobian[i, j] = (r[i] - r0[i]) / h
+        position_by_x[0, j] = (y[0] - p0x) / h
+        position_by_x[1, j] = (y[1] - p0y) / h
+        position_by_x[2, j] = (y[2] - p0z) / h
     perturbed_tip = tip.copy()
-    info[0] = CONVERGED
     for column in range(components.shape[0]):
         index = TIP_FOLLOWER_FORCE + components[column]
-        perturbed_tip[index] = tip[index] + steps[column]
-        anchor[:, :] = reference
-        trial_jacobian[:, :] = jacobian
-        solve(kind, resolution, anchor, trial_jacobian, True, profile, perturbed_tip, base, beta, 1.0,
-              tolerance, max_iterations, nodes_p, nodes_r, clamp_state, column_info)
+        step = steps[column]
+        perturbed_tip[index] = tip[index] + step
+        shoot(kind, resolution, x, reference, profile, perturbed_tip, base, beta, 1.0, r, y, work,
+              nodes_p, nodes_r, False)
         perturbed_tip[index] = tip[index]
-        if column_info[0] != CONVERGED:
-            info[0] = column_info[0]
-            return
-        # The shot puts the tip at the origin: the tip relative to the clamp is -p(0).
+        for i in range(3):
+            r[i] = -(r[i] - r0[i]) / step
+        if not _solve3(jacobian, r, rotation_rate):
+            return False
+        position_rate[0] = (y[0] - p0x) / step
+        position_rate[1] = (y[1] - p0y) / step
+        position_rate[2] = (y[2] - p0z) / step
+        for i in range(3):
+            moved[i] = -(position_rate[i] + position_by_x[i, 0] * rotation_rate[0]
+                         + position_by_x[i, 1] * rotation_rate[1] + position_by_x[i, 2] * rotation_rate[2])
         for k in range(3):
-            perturbed_position[k] = -clamp_state[k] * length
-        body_twist(reference, nominal_position, nodes_r[nodes_r.shape[0] - 1], perturbed_position, twist)
+            columns[k, column] = length * (reference[0, k] * moved[0] + reference[1, k] * moved[1]
+                                           + reference[2, k] * moved[2])
+            columns[3 + k, column] = rotation_rate[k]
         for k in range(6):
-            columns[k, column] = twist[k] / steps[column]
+            if not np.isfinite(columns[k, column]):
+                return False
+    return True

@@ -262,11 +262,15 @@ class ShootingModel:
         prepared = self.prepare(jet_forces_n, params, previous)
         return self.solve_prepared(prepared, warm_start if warm_start is not None else previous)
 
-    def solve_prepared(self, prepared: PreparedProblem, warm_start: Solution | None = None) -> Solution:
-        """Solve a packed problem; see `solve`."""
+    def solve_prepared(self, prepared: PreparedProblem, warm_start: Solution | None = None,
+                       predicted_tip_turn_rad: np.ndarray | None = None) -> Solution:
+        """Solve a packed problem; see `solve`. ``predicted_tip_turn_rad``: how far the tip
+        is expected to turn from ``warm_start``'s (a rotation vector in its tip frame, from
+        a sensitivity): the solver then starts there, with ``warm_start``'s Jacobian."""
         work = _Workspace(len(prepared.node_arc_length_m))
         if warm_start is not None and warm_start.jacobian.shape == (kernels.UNKNOWNS, kernels.UNKNOWNS):
-            reference = warm_start.tip_rotation_in_base.copy()
+            reference = (warm_start.tip_rotation_in_base.copy() if predicted_tip_turn_rad is None
+                         else kernels.turned(warm_start.tip_rotation_in_base, predicted_tip_turn_rad))
             jacobian = warm_start.jacobian.copy()
             if self._run(prepared, reference, jacobian, True, 1.0, work):
                 return self._solution(prepared, jacobian, work)
@@ -284,30 +288,20 @@ class ShootingModel:
             f"{prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].tolist()} N (residual {work.info[2]:.3g} "
             f"after a direct solve and load ramping in up to {RAMP_SCHEDULES[-1]} stages)")
 
-    def with_accurate_jacobian(self, solution: Solution, prepared: PreparedProblem) -> Solution:
-        """The same solution carrying a finite-difference Jacobian at its own tip
-        orientation (three extra shots) instead of the Broyden estimate, so that solves of
-        nearby problems seeded from it converge in one step: what a sensitivity wants."""
-        jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
-        kernels.jacobian_at(self.kind, self.resolution, solution.tip_rotation_in_base, prepared.profile,
-                            prepared.tip, prepared.base, prepared.beta, jacobian)
-        return replace(solution, jacobian=jacobian)
-
-    def tip_wrench_columns(self, prepared: PreparedProblem, seed: Solution, components: np.ndarray,
-                           steps: np.ndarray) -> np.ndarray:
+    def tip_wrench_columns(self, prepared: PreparedProblem, nominal: Solution, components: np.ndarray,
+                           steps: np.ndarray) -> tuple[np.ndarray, Solution]:
         """(6, k) tip twists per nondimensional step of tip follower wrench components
-        (0-2 force, 3-5 moment), solved from ``seed`` (which should carry an accurate
-        Jacobian, see `with_accurate_jacobian`). Used by `sensitivity`."""
-        work = _Workspace(len(prepared.node_arc_length_m))
+        (0-2 force, 3-5 moment) at the converged ``nominal`` solution of ``prepared``, in
+        one kernel call (`kernels.tip_wrench_sensitivity`), and ``nominal`` carrying the
+        accurate Jacobian computed on the way. Used by `sensitivity`."""
+        jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
         columns = np.empty((6, len(components)))
-        kernels.tip_wrench_sensitivity(self.kind, self.resolution, seed.tip_rotation_in_base,
-                                       seed.tip_position_in_base_m, seed.jacobian,
-                                       prepared.profile, prepared.tip, prepared.base, prepared.beta, self.tolerance,
-                                       self.max_iterations, components, steps, prepared.length_m, work.nodes_p,
-                                       work.nodes_r, columns, work.info)
-        if work.info[0] != kernels.CONVERGED:
-            raise ConvergenceError(f"{self.name} model did not converge for a perturbed disturbance wrench")
-        return columns
+        if not kernels.tip_wrench_sensitivity(self.kind, self.resolution, nominal.tip_rotation_in_base,
+                                              prepared.profile, prepared.tip, prepared.base, prepared.beta,
+                                              components, steps, prepared.length_m, jacobian, columns):
+            raise ConvergenceError(f"{self.name} model: the shooting Jacobian is singular or a shot diverged "
+                                   "at this solution; no sensitivity")
+        return columns, replace(nominal, jacobian=jacobian)
 
     def _ramp(self, prepared: PreparedProblem, stages: int, work: "_Workspace") -> Solution | None:
         """Continuation: scale every load from 1/stages up to 1, each stage seeded by the last."""
