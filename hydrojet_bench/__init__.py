@@ -6,6 +6,8 @@ The analysis commands are functions here too, for notebooks and scripts (`hydroj
 typed result with ``to_pandas()`` and ``plot()``.
 """
 
+import importlib
+
 __version__ = "0.1.0"
 
 API = ("load", "calibrate", "compare", "diagnose", "replay", "study")
@@ -13,10 +15,9 @@ __all__ = ["__version__", *API]
 
 
 def __getattr__(name: str):
-    # Imported on first use: the command line imports this package for its version and
-    # should not pay for pandas, matplotlib and the analyses it may not run.
+    # Imported on first use, by name: the command line and the bench import this package
+    # for its version, and should neither pay for the analyses nor, for the layer rules,
+    # depend on them.
     if name in API:
-        from . import api
-
-        return getattr(api, name)
+        return getattr(importlib.import_module(f"{__name__}.api"), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -126,8 +126,8 @@ class ReplayResult:
     (``steps``, the validation sweeps when it has any). live_difference_deg: the largest
     difference from the live estimates when replayed with the live settings (0:
     identical; None otherwise or without live predictions). calibration: the fit on the
-    logged calibration poses when another model had no --params. skipped: steps where
-    the model did not converge, left out."""
+    ``calibration_poses`` logged calibration poses when another model had no params.
+    skipped: steps where the model did not converge, left out."""
 
     model: ShootingModel
     steps: Dataset
@@ -135,6 +135,7 @@ class ReplayResult:
     live_settings: bool
     live_difference_deg: float | None = None
     calibration: CalibrationResult | None = None
+    calibration_poses: int = 0
     skipped: int = 0
     log_damage: dict | None = None
 
@@ -148,7 +149,7 @@ class ReplayResult:
         document = {name: {key: value[name] for key, value in tables.items()}
                     for name in ("orientation_rmse_deg", "position_rmse_mm", "by_sweep", "by_bend")}
         calibration = None if self.calibration is None else {
-            "rms_orientation_deg_before": self.calibration.rms_orientation_deg_before,
+            "poses": self.calibration_poses, "rms_orientation_deg_before": self.calibration.rms_orientation_deg_before,
             "rms_orientation_deg_after": self.calibration.rms_orientation_deg_after,
             "parameters": dict(zip(self.calibration.names, map(float, self.calibration.values)))}
         return {"model": self.model.name, "effects": [effect.name for effect in self.model.effects], **document,

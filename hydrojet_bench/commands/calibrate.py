@@ -1,4 +1,4 @@
-"""`hydrojet-bench calibrate INPUT [--model M] [--effect NAME ...] -o params.toml`.
+"""`hydrojet-bench calibrate INPUT [--model M] [--effect NAME ...] -o params.toml [--json PATH]`.
 
 Fits E0, EL, L and the constant disturbance wrench w_d (plus the parameters of the
 --effect's) to the calibration rows (sweep -1) of the input, as in the paper's
@@ -13,7 +13,7 @@ from pathlib import Path
 from ..errors import UserError
 from ..estimation.calibration import DEFAULT_POSITION_WEIGHT_RAD_PER_M, calibrate_dataset
 from ..model_choice import COSSERAT, model_choice
-from ..params_io import ParameterFile, write_parameter_file
+from ..params_io import write_parameter_file
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
 from .log_notice import warn_if_incomplete
@@ -28,10 +28,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--position-weight", type=float, default=DEFAULT_POSITION_WEIGHT_RAD_PER_M,
                         metavar="RAD_PER_M", help="weight of tip position errors when positions were "
                         f"measured (default {DEFAULT_POSITION_WEIGHT_RAD_PER_M:g}; 0 = orientation only)")
+    render.add_json_argument(parser, "the parameter file's content, the unidentifiable pairs and the evaluations")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..api import CalibrateResult, calibration_parameter_file
+
     if not args.position_weight >= 0:
         raise UserError(f"--position-weight must be >= 0, got {args.position_weight}")
     profile, steps = load_steps(args.input, args.profile)
@@ -57,13 +60,11 @@ def run(args: argparse.Namespace) -> int:
     for first, second, correlation in result.unidentifiable:
         console.print(f"[yellow]warning:[/] {first} and {second} are not separately identifiable on these poses "
                       f"(correlation {correlation:+.3f}); their individual values mean little")
-    write_parameter_file(args.output, ParameterFile(
-        model=model.name, effects=tuple(effect.name for effect in model.effects),
-        parameters=dict(zip(result.names, map(float, result.values))),
-        standard_errors=dict(zip(result.names, map(float, result.standard_errors))),
-        calibration={"data": str(args.input), "profile": profile.source,
-                     "poses": len(steps.calibration_rows()),
-                     "rms_orientation_deg_before": round(result.rms_orientation_deg_before, 4),
-                     "rms_orientation_deg_after": round(result.rms_orientation_deg_after, 4)}))
+    content = calibration_parameter_file(model.name, [effect.name for effect in model.effects], result, args.input,
+                                         profile, len(steps.calibration_rows()))
+    write_parameter_file(args.output, content)
     console.print(f"wrote {render.plain(args.output)}")
+    if args.json:
+        render.write_json(args.json, CalibrateResult(model, choice.effect_specs, steps.calibration_rows(), result,
+                                                     content).as_dict())
     return 0

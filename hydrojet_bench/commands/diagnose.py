@@ -125,7 +125,8 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
         lines.append(f"Hard to tell apart from: {', '.join(diagnosis.alternatives)} (score within 10).")
     if diagnosis.remaining_excess:
         lines.append("Even with it the held-out error stays above the noise floor: something else is missing too.")
-    console.print(Panel("\n".join(lines), title=title, border_style=style))
+    # On a pipe the console is as wide as a table may need: the box fits its text there.
+    console.print(Panel("\n".join(lines), title=title, border_style=style, expand=console.is_terminal))
     console.print(_next_steps(diagnosis, args))
 
 

@@ -11,14 +11,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rich.console import Console
-
 from ..data.csv_io import write_csv
 from ..effects import load_effect
 from ..files import check_writable_target, make_folder_for, publish
 from ..plans import paper_protocol
 from ..profile import load_profile
 from ..twin import DigitalTwin, TwinConfig
+from . import render
 from .common import check_seed
 
 
@@ -51,6 +50,6 @@ def run(args: argparse.Namespace) -> int:
     dataset = recording.to_dataset(profile, f"twin seed {config.seed}")
     rows = publish(args.output, "recording", lambda partial: write_csv(dataset, partial), overwrite=args.overwrite)
     hidden_names = ", ".join(effect.name for effect in hidden) or "none"
-    Console().print(f"wrote {rows} samples (229 steps: 40 calibration poses, 9 sweeps) to {args.output}; "
+    render.console().print(f"wrote {rows} samples (229 steps: 40 calibration poses, 9 sweeps) to {args.output}; "
                     f"hidden effects: {hidden_names}", markup=False)
     return 0
