@@ -35,7 +35,7 @@ from ..estimation import OnlineSettings
 from ..estimation.calibration import DEFAULT_POSITION_WEIGHT_RAD_PER_M, CalibrationResult, calibrate_dataset
 from ..inputs import load_dataset
 from ..logs.condition import log_condition
-from ..model_choice import COSSERAT, ModelChoice, ModelDefaults, build_model, choose_model
+from ..model_choice import COSSERAT, ModelChoice, ModelDefaults, choose_model
 from ..params_io import ParameterFile
 from ..profile import RigProfile
 from .results import (CalibrateResult, CompareResult, DiagnoseResult, Measurements, ReplayResult, StudyResult)
@@ -114,15 +114,12 @@ def compare(data: Data, params: Params, *, baseline: Params = None, online: bool
         raise UserError(f"{path}: no steps to compare")
     settings = OnlineSettings() if online else None
 
-    def evaluate(choice: ModelChoice, source: Params):
-        values = _parameters(choice, source, steps.profile)
-        return compare_methods(choice.model, values, validation, settings)
+    def evaluate(choice: ModelChoice):
+        return compare_methods(choice.model, choice.parameters(steps.profile.model_parameters()), validation, settings)
 
     after_choice = _choice(model, effects, params)
-    before = None
-    if baseline is not None:
-        before = evaluate(_choice(model, (), baseline, effect_files=effects), baseline)
-    return CompareResult(after_choice.model, _source(params), validation, evaluate(after_choice, params), before,
+    before = None if baseline is None else evaluate(_choice(model, (), baseline, effect_files=effects))
+    return CompareResult(after_choice.model, _source(params), validation, evaluate(after_choice), before,
                          _log_damage(path))
 
 
@@ -159,7 +156,7 @@ def replay(log: str | Path, *, model: str | None = None, effects: Sequence[str] 
     session = read_session(Path(log), profile)
     choice = _choice(model, effects, params, ModelDefaults(session.model_name, session.effects))
     nominal = session.profile.model_parameters()
-    values = None if params is None else _parameters(choice, params, session.profile)
+    values = None if params is None else choice.parameters(nominal)
     live_settings = values is None and choice.model.name == session.model_name and not effects
     calibration = None
     if values is None and not live_settings:
@@ -250,21 +247,16 @@ def _log_damage(path: Path) -> dict | None:
 def _choice(model: str | None, effects: Sequence[str], params: Params, defaults: ModelDefaults = COSSERAT, *,
             effect_files: Sequence[str] | None = None) -> ModelChoice:
     """The commands' model rule; a `CalibrateResult` brings its model and effects as its
-    parameter file would."""
+    parameter file would (its effect files among them)."""
     if not isinstance(params, CalibrateResult):
         return choose_model(model, tuple(effects), None if params is None else Path(params), defaults,
                             effect_files=effect_files)
-    specs = tuple(dict.fromkeys([*params.effect_specs, *effects]))
-    built, requested = build_model(model or params.model.name, specs)
-    return ModelChoice(built, requested, specs)
-
-
-def _parameters(choice: ModelChoice, params: Params, profile: RigProfile):
-    nominal = profile.model_parameters()
-    if isinstance(params, CalibrateResult):
-        return params.parameter_file.apply(nominal, "the calibration")
-    return choice.parameters(nominal)
+    files = [*params.effect_specs, *(effects if effect_files is None else effect_files)]
+    return choose_model(model, tuple(effects), _source(params), defaults, effect_files=files,
+                        parameter_file=params.parameter_file)
 
 
 def _source(params: Params) -> str:
-    return "the calibration" if isinstance(params, CalibrateResult) else str(params)
+    if isinstance(params, CalibrateResult):
+        return f"the calibration on {params.parameter_file.calibration.get('data', 'its data')}"
+    return str(params)
