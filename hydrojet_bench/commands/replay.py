@@ -57,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
         for path in write_report(args.report, result.results, result.steps, model.name):
             console.print(f"wrote {render.plain(path)}")
     if result.skipped:
-        console.print(f"[yellow]{result.skipped} step(s) did not converge and were left out[/]")
+        render.progress_console().print(f"[yellow]warning:[/] {result.skipped} step(s) did not converge and were "
+                                        "left out")
     if args.json:
         render.write_json(args.json, result.as_dict())
     return 0 if np.isfinite(result.results["ref"].overall.orientation_rmse_deg) else 1
