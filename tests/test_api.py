@@ -9,10 +9,12 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from matplotlib.figure import Figure
 
 import hydrojet_bench as hj
+from hydrojet_bench.api import StudyResult
 from hydrojet_bench.data.csv_io import write_csv
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.plans import calibration_plan, validation_sweeps
@@ -94,3 +96,15 @@ def test_mistakes_raise_user_error_naming_the_file_or_argument(mystery, tmp_path
     (tmp_path / "data.txt").write_text("t,q1\n")
     with pytest.raises(UserError, match=message.replace(".", r"\.")):
         call(mystery, tmp_path)
+
+
+def test_a_study_result_tables_and_plots_its_confusion(tmp_path):
+    rows = pd.DataFrame({"truth": ["none", "jet_gain", "jet_gain", "boom"], "verdict": ["none", "jet_gain", "none", None],
+                         "error": [None, None, None, "boom inside the twin"]})
+    result = StudyResult("tiny", tmp_path, rows, None)
+    confusion = result.confusion()
+    assert confusion.loc["jet_gain", "jet_gain"] == 1 and confusion.loc["jet_gain", "none"] == 1
+    assert "boom" not in confusion.index  # failed cells have no verdict to count
+    figure = result.plot()
+    assert figure.axes[0].get_xlabel() == "verdict" and figure.axes[0].get_ylabel() == "hidden truth"
+    assert result.to_pandas() is not rows and result.to_pandas().equals(rows)
