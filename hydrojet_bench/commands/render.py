@@ -27,7 +27,8 @@ PIPE_WIDTH = 1000
 
 EXIT_CODES = {0: "done", 1: "internal error (a bug: it prints a traceback)",
               2: "a mistake in the command line or its inputs (one line on standard error naming the file "
-                 "and field)", 130: "interrupted (Ctrl-C)"}
+                 "and field)", 130: "interrupted (Ctrl-C)",
+              141: "standard output closed before the end (a reader such as `head` stopped early)"}
 
 
 def add_json_argument(parser: argparse.ArgumentParser, what: str = "the figures") -> None:
@@ -49,6 +50,9 @@ def console(stderr: bool = False) -> Console:
     """A console on standard output (or error) that, when it is not a terminal, never
     cuts or wraps (see the module docstring)."""
     result = Console(stderr=stderr)
+    # rich exits with 1, the code of a bug, when the reader of a pipe goes away: raised
+    # instead, for the command line to exit as a shell does on SIGPIPE.
+    result.on_broken_pipe = _raise_broken_pipe
     if not result.is_terminal:
         result.width = PIPE_WIDTH
         result.soft_wrap = True  # titles and text lines whole too, never cropped
@@ -101,6 +105,10 @@ def write_json(path: Path, document: object) -> None:
         Path(path).write_text(text)
     except OSError as error:
         raise UserError(f"cannot write {path}: {error.strerror}") from None
+
+
+def _raise_broken_pipe() -> None:
+    raise BrokenPipeError("standard output closed")
 
 
 def _is_stdout(path: Path | None) -> bool:

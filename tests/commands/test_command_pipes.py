@@ -88,6 +88,17 @@ def test_json_to_standard_output_alone(folder, command):
         assert set(document["parameters"]) == set(document["standard_errors"]) and document["evaluations"] > 0
 
 
+@pytest.mark.parametrize("json_option", [[], ["--json", "-"]], ids=["tables", "json"])
+def test_a_reader_that_stops_early_is_exit_code_141_without_a_traceback(folder, json_option):
+    process = subprocess.Popen([sys.executable, "-m", "hydrojet_bench.cli", "calibrate", f"{LONG_NAME}.csv",
+                                "-o", "r.toml", *json_option], cwd=folder, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    process.stdout.close()  # as `| head -0` would: every write to standard output fails
+    _, err = process.communicate(timeout=300)
+    assert process.returncode == 141, err
+    assert "Traceback" not in err and "Exception ignored" not in err
+
+
 def test_every_help_states_the_exit_codes():
     main = build_parser()
     every = [main, *_all_subparsers(main)]
