@@ -4,19 +4,22 @@ Each subcommand lives in `hydrojet_bench.commands.<name>` and exposes
 `register(subparsers)`, which adds its parser and sets `func`; the commands share their
 options (`commands.common`), their model rule (`hydrojet_bench.model_choice`) and their
 output (`commands.render`). A `UserError` is printed as one clear line with exit code 2,
-never as a traceback.
+never as a traceback; every help ends with the exit codes (`render.EXIT_CODES`, and
+those a command adds).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from rich.console import Console
 from rich.markup import escape
 
 from . import __version__
+from .commands import render
 from .errors import ConvergenceError, UserError
 
 # Order is the order shown in --help.
@@ -33,7 +36,21 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(f"{__package__}.commands.{name}").register(subparsers)
+    render.add_exit_codes(parser, {1: "a result that is no answer (replay: errors not finite; batch: a log failed)",
+                                   143: "run stopped by SIGTERM (valves closed, log finished)"})
+    for command in _all_subparsers(parser):
+        if "exit codes:" not in (command.epilog or ""):
+            render.add_exit_codes(command)
     return parser
+
+
+def _all_subparsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
+    """Every command's parser, and the parsers of its own subcommands (`batch diagnose`)."""
+    found = []
+    for action in parser._subparsers._group_actions if parser._subparsers else ():
+        for child in dict.fromkeys(action.choices.values()):
+            found += [child, *_all_subparsers(child)]
+    return found
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -55,6 +72,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         Console(stderr=True).print("interrupted")
         return 130
+    except BrokenPipeError:
+        # The reader stopped early (`| head`): no one to tell. Standard output goes to
+        # /dev/null so that flushing it at exit does not fail again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
 
 
 def _input_files(args: argparse.Namespace) -> str:

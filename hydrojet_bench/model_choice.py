@@ -47,7 +47,7 @@ class ModelChoice:
     requested: tuple[Effect, ...]
     effect_specs: tuple[str, ...]
     parameter_file: ParameterFile | None = None
-    parameter_path: Path | None = None
+    parameter_path: Path | str | None = None
 
     @property
     def calibration_names(self) -> tuple[str, ...]:
@@ -70,16 +70,18 @@ def build_model(name: str, effect_specs: Sequence[str]) -> tuple[ShootingModel, 
     return make_model(name, always + requested), requested
 
 
-def choose_model(model: str | None, effects: Sequence[str], parameter_path: Path | None,
-                 defaults: ModelDefaults = COSSERAT, *, effect_files: Sequence[str] | None = None) -> ModelChoice:
+def choose_model(model: str | None, effects: Sequence[str], parameter_path: Path | str | None,
+                 defaults: ModelDefaults = COSSERAT, *, effect_files: Sequence[str] | None = None,
+                 parameter_file: ParameterFile | None = None) -> ModelChoice:
     """The model per the rule above. An effect the parameter file names that is not in
     the library is looked up by name among ``effect_files`` (default: ``effects``), the
-    path/to/file.py:Class specs of the command line."""
+    path/to/file.py:Class specs of the command line. ``parameter_file``: parameters
+    already in memory (a calibration just made), named ``parameter_path`` in errors."""
     if parameter_path is None:
         parameter_file = None
         name, base_specs = model or defaults.model, list(defaults.effects)
     else:
-        parameter_file = read_parameter_file(parameter_path)
+        parameter_file = parameter_file or read_parameter_file(Path(parameter_path))
         name, base_specs = model or parameter_file.model, _file_effect_specs(
             parameter_file, parameter_path, effects if effect_files is None else effect_files)
     specs = tuple(dict.fromkeys([*base_specs, *effects]))
@@ -98,7 +100,7 @@ def model_choice(args: argparse.Namespace, defaults: ModelDefaults = COSSERAT) -
     return choose_model(args.model, args.effect, getattr(args, "params", None), defaults)
 
 
-def _file_effect_specs(parameter_file: ParameterFile, path: Path, effect_files: Sequence[str]) -> list[str]:
+def _file_effect_specs(parameter_file: ParameterFile, path: Path | str, effect_files: Sequence[str]) -> list[str]:
     """The parameter file's effects as specs: a file it names relative to itself, unless
     an effect file of the command line has the same name (the command line wins); a name
     outside the library, from an older file, is looked up among those effect files."""

@@ -130,10 +130,12 @@ def test_a_step_above_the_valves_limit_is_predicted_at_the_clipped_force_with_a_
     plan.write_text("q1,q2,q3,settle_s\n0.3,0,0,5\n")
     assert main(["run", "--plan", str(plan), "--no-live", "--time-scale", "20", "--no-calibration",
                  "--log", str(tmp_path / "x.mcap")]) == 0
-    out = " ".join(capsys.readouterr().out.split())
+    printed = capsys.readouterr()
+    err = " ".join(printed.err.split())  # progress and warnings: standard error
     warning = "1 step(s) of the plan (1) ask more than the valves give (0.15, 0.15, 0.15 N per jet)"
-    assert f"warning: {warning}" in out
-    assert "step 1/1 sweep 0 (clipped to the valves' limit): tip error ref" in out
+    assert f"warning: {warning}" in err
+    assert "step 1/1 sweep 0 (clipped to the valves' limit): tip error ref" in err
+    assert "session done: 1/1 steps" in printed.out and "warning" not in printed.out
     events = read_log(tmp_path / "x.mcap", topics=["/events"]).messages
     assert any(e.level == "warning" and e.message.startswith(warning) for e in events)
     commands = [m.jet_forces_n for m in read_log(tmp_path / "x.mcap", topics=["/valves/command"]).messages]

@@ -7,7 +7,6 @@ under ``-o DIR`` (a rerun into the same DIR skips the logs already done).
 from __future__ import annotations
 
 import argparse
-import math
 import tempfile
 from pathlib import Path
 
@@ -41,6 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         sub.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask cluster (tcp://host:8786)")
         sub.add_argument("--workers", type=int, default=2, help="local worker processes (default: 2)")
         render.add_json_argument(sub, "the rows")
+        render.add_exit_codes(sub, {1: "some log failed (its row names the error; the others are reported)"})
         sub.set_defaults(func=run)
 
 
@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
                   store, error_row=lambda task, text: log_row(task, columns, text), label="logs")
         table = store.table()
     order = {task.path: index for index, task in enumerate(tasks)}
-    rows = sorted((_plain(row) for row in table.to_dict("records") if row["log"] in order),
+    rows = sorted((render.json_row(row) for row in table.to_dict("records") if row["log"] in order),
                   key=lambda row: order[row["log"]])
     console = render.console_for(args)
     view = render.table(f"batch {args.action}: {len(rows)} logs", labels=("log",), numbers=shown)
@@ -71,12 +71,6 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         render.write_json(args.json, rows)
     return 1 if any(row["error"] for row in rows) else 0
-
-
-def _plain(row: dict) -> dict:
-    """A pandas record as JSON-ready values: NaN and missing figures become None."""
-    return {key: None if isinstance(value, float) and math.isnan(value) else
-            (value.item() if hasattr(value, "item") else value) for key, value in row.items()}
 
 
 def _cell(value: object) -> str:

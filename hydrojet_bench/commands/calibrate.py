@@ -1,4 +1,4 @@
-"""`hydrojet-bench calibrate INPUT [--model M] [--effect NAME ...] [--fit-on ROWS] -o params.toml`.
+"""`hydrojet-bench calibrate INPUT [--model M] [--effect NAME ...] [--fit-on ROWS] -o params.toml [--json PATH]`.
 
 Fits E0, EL, L and the constant disturbance wrench w_d (plus the parameters of the
 --effect's) to the rows of the input that identify them, and writes them with their
@@ -22,7 +22,7 @@ from ..effects import CALIBRATION_POSES, SWEEPS, identifying_rows
 from ..estimation.calibration import (ALL_ROWS, DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_dataset,
                                       fit_mask, rows_that_identify)
 from ..model_choice import COSSERAT, ModelChoice, model_choice
-from ..params_io import ParameterFile, effect_specs, write_parameter_file
+from ..params_io import effect_specs, write_parameter_file
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
 from .next_steps import command, input_words, print_next
@@ -41,10 +41,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--fit-on", choices=FIT_ON, default=None,
                         help="rows to fit: the calibration poses (sweep -1), the sweeps, or all (default: the "
                              "poses, and all when an --effect is identified only by sweeps)")
+    render.add_json_argument(parser, "the parameter file's content, the unidentifiable pairs and the evaluations")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..api import CalibrateResult, calibration_parameter_file
+
     if not args.position_weight >= 0:
         raise UserError(f"--position-weight must be >= 0, got {args.position_weight}")
     choice = model_choice(args)  # validates --effect before the data is read
@@ -76,16 +79,13 @@ def run(args: argparse.Namespace) -> int:
         console.print(f"[yellow]warning:[/] {first} and {second} are not separately identifiable on these rows "
                       f"(correlation {correlation:+.3f}); their individual values mean little")
     make_folder_for(args.output)
-    write_parameter_file(args.output, ParameterFile(
-        model=model.name, effects=effect_specs(model.effects, args.output.parent),
-        parameters=dict(zip(result.names, map(float, result.values))),
-        standard_errors=dict(zip(result.names, map(float, result.standard_errors))),
-        calibration={"data": str(args.input), "profile": profile.source, "fit_on": fit_on,
-                     "poses": int(np.sum(rows & (steps.sweep == -1))),
-                     "sweep_steps": int(np.sum(rows & (steps.sweep >= 0))),
-                     "rms_orientation_deg_before": round(result.rms_orientation_deg_before, 4),
-                     "rms_orientation_deg_after": round(result.rms_orientation_deg_after, 4)}))
+    content = calibration_parameter_file(model.name, effect_specs(model.effects, args.output.parent), result,
+                                         args.input, profile, fit_on, steps, rows)
+    write_parameter_file(args.output, content)
     console.print(f"wrote {render.plain(args.output)}")
+    if args.json:
+        render.write_json(args.json, CalibrateResult(model, choice.effect_specs, steps.select(rows), result,
+                                                     content).as_dict())
     compare = command("compare", *input_words(args), "--params", args.output, "--online")
     print_next(console, "see how it predicts the sweeps with", [compare])
     return 0

@@ -193,7 +193,8 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
     final = diagnosis.final
     if final.remaining_excess:
         lines.append("Even with it the held-out error stays above the noise floor: something else is missing too.")
-    console.print(Panel("\n".join(lines), title=title, border_style=style))
+    # On a pipe the console is as wide as a table may need: the box fits its text there.
+    console.print(Panel("\n".join(lines), title=title, border_style=style, expand=console.is_terminal))
 
 
 def _found_effects(diagnosis: Diagnosis, candidates: Sequence[Effect]) -> list[Effect]:

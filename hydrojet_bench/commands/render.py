@@ -1,10 +1,15 @@
 """How every command shows its results: rich tables on the console, JSON documents in a
-file or on standard output (``--json -``, which moves the tables to standard error)."""
+file or on standard output (``--json -``, which moves the tables to standard error).
+
+Results go to standard output, progress and warnings to standard error. On a pipe or a
+file, tables keep their natural width, so no name is ever cut short ("…") or wrapped,
+and text lines are not wrapped either: ``grep`` and ``cut`` see whole lines."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -16,6 +21,14 @@ from rich.table import Table
 from ..errors import UserError
 
 STDOUT = "-"
+# The width of a console that is not a terminal: a table is printed at its natural width
+# below it, and no table here comes near it.
+PIPE_WIDTH = 1000
+
+EXIT_CODES = {0: "done", 1: "internal error (a bug: it prints a traceback)",
+              2: "a mistake in the command line or its inputs (one line on standard error naming the file "
+                 "and field)", 130: "interrupted (Ctrl-C)",
+              141: "standard output closed before the end (a reader such as `head` stopped early)"}
 
 
 def add_json_argument(parser: argparse.ArgumentParser, what: str = "the figures") -> None:
@@ -23,9 +36,37 @@ def add_json_argument(parser: argparse.ArgumentParser, what: str = "the figures"
                         help=f"write {what} as JSON to PATH (- for standard output)")
 
 
+def add_exit_codes(parser: argparse.ArgumentParser, codes: dict[int, str] | None = None) -> None:
+    """State the exit codes at the end of ``parser``'s help: the common ones and, in
+    ``codes``, those the command adds (or another meaning of a common one)."""
+    described = dict(EXIT_CODES)
+    for code, meaning in (codes or {}).items():
+        described[code] = f"{described[code]}, or {meaning}" if code in described else meaning
+    text = "exit codes: " + "; ".join(f"{code} {described[code]}" for code in sorted(described)) + "."
+    parser.epilog = f"{parser.epilog} {text}" if parser.epilog else text
+
+
+def console(stderr: bool = False) -> Console:
+    """A console on standard output (or error) that, when it is not a terminal, never
+    cuts or wraps (see the module docstring)."""
+    result = Console(stderr=stderr)
+    # rich exits with 1, the code of a bug, when the reader of a pipe goes away: raised
+    # instead, for the command line to exit as a shell does on SIGPIPE.
+    result.on_broken_pipe = _raise_broken_pipe
+    if not result.is_terminal:
+        result.width = PIPE_WIDTH
+        result.soft_wrap = True  # titles and text lines whole too, never cropped
+    return result
+
+
 def console_for(args: argparse.Namespace) -> Console:
-    """The console for the tables: standard output unless the JSON document goes there."""
-    return Console(stderr=_is_stdout(getattr(args, "json", None)))
+    """The console for the results: standard output unless the JSON document goes there."""
+    return console(stderr=_is_stdout(getattr(args, "json", None)))
+
+
+def progress_console() -> Console:
+    """Where progress, notes and warnings go: standard error."""
+    return console(stderr=True)
 
 
 def plain(value: object) -> str:
@@ -46,6 +87,13 @@ def table(title: str, labels: Sequence[str], numbers: Sequence[str], caption: st
     return result
 
 
+def json_row(row: dict) -> dict:
+    """A pandas record as JSON-ready values: numpy scalars as Python ones, NaN and
+    missing figures as None."""
+    values = {key: value.item() if hasattr(value, "item") else value for key, value in row.items()}
+    return {key: None if isinstance(value, float) and math.isnan(value) else value for key, value in values.items()}
+
+
 def write_json(path: Path, document: object) -> None:
     """``document`` as indented JSON to ``path`` (``-``: standard output); a path that
     cannot be written is a `UserError`."""
@@ -57,6 +105,10 @@ def write_json(path: Path, document: object) -> None:
         Path(path).write_text(text)
     except OSError as error:
         raise UserError(f"cannot write {path}: {error.strerror}") from None
+
+
+def _raise_broken_pipe() -> None:
+    raise BrokenPipeError("standard output closed")
 
 
 def _is_stdout(path: Path | None) -> bool:

@@ -62,6 +62,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="stream the session to Foxglove or Lichtblick over their WebSocket protocol on "
                              f"ws://HOST:PORT (default 127.0.0.1:{FOXGLOVE_PORT}; port 0: any free one, printed; "
                              "the server has no authentication: another HOST opens the session to that network)")
+    parser.epilog = ("Progress (the live view, or a line per sweep) and warnings go to standard error; what runs, "
+                     "its Table II and the next commands to standard output.")
+    render.add_exit_codes(parser, {143: "stopped by SIGTERM (valves closed, log finished)"})
     parser.set_defaults(func=run)
 
 
@@ -110,20 +113,21 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
                              seed=args.seed, warnings=(clipped_warning,) if clipped_warning else (),
                              command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]), overwrite_log=overwrite)
     console = render.console_for(args)
+    progress = render.progress_console()
     rig = "simulated rig" if settings.transports.simulated else "rig"
     console.print(f"session on [bold]{render.plain(profile.name)}[/] ({rig}): "
                   f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.session.time_scale:g}, "
                   f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; "
                   f"log {render.plain(log_path)}", highlight=False)
     if clipped_warning:
-        console.print(f"[yellow]warning:[/] {clipped_warning}")
+        progress.print(f"[yellow]warning:[/] {clipped_warning}")
     if server is not None:
-        console.print(f"Foxglove: open a connection to {server.url} (layout: docs/foxglove/hydrojet.json)",
-                      highlight=False, markup=False)
-    result = asyncio.run(_run_session(request, console, live=not args.no_live and console.is_terminal,
+        progress.print(f"Foxglove: open a connection to {server.url} (layout: docs/foxglove/hydrojet.json)",
+                       highlight=False, markup=False)
+    result = asyncio.run(_run_session(request, progress, live=not args.no_live and progress.is_terminal,
                                       clipped=frozenset(clipped), on_log_message=server and server.publish))
     if result is None:
-        console.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
+        progress.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
         return 143
     _print_outcome(console, result, model.name, args)
     return 0

@@ -11,8 +11,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rich.console import Console
-
 from ..data.csv_io import write_csv
 from ..errors import UserError
 from ..files import check_writable_target, make_folder_for, publish
@@ -20,6 +18,7 @@ from ..plans import paper_protocol
 from ..profile import load_profile
 from ..twin import DigitalTwin, TwinConfig
 from ..twin.hidden import HIDDEN, inert_effects, parse_hidden
+from . import render
 from .common import check_seed
 from .next_steps import command, print_next
 
@@ -68,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     dataset = recording.to_dataset(profile, f"twin seed {config.seed}")
     rows = publish(args.output, "recording", lambda partial: write_csv(dataset, partial), overwrite=args.overwrite)
     hidden_names = ", ".join(effect.name for effect in hidden) or "none"
-    console = Console()
+    console = render.console()
     console.print(f"wrote {rows} samples (229 steps: 40 calibration poses, 9 sweeps) to {args.output}; "
                   f"hidden effects: {hidden_names}", markup=False)
     # A CSV file is read with the "sim" profile unless told otherwise.

@@ -1,10 +1,12 @@
-"""`hydrojet-bench study SPEC.toml [-o DIR] [--scheduler ADDRESS] [--workers N] [--csv]`.
+"""`hydrojet-bench study SPEC.toml [-o DIR] [--scheduler ADDRESS] [--workers N] [--csv] [--json PATH]`.
 
 Which effects can a protocol detect, and from what size? Every cell of the spec
 (`hydrojet_bench.studies.spec`) is simulated on the twin and diagnosed, on Dask
-distributed; rows go to ``DIR/rows/`` (Parquet) as they finish, and a rerun into the
-same DIR skips the finished cells. The report (``DIR/report/``) is written at the end;
-``--report-only DIR`` rebuilds it from the stored rows.
+distributed (`hydrojet_bench.api.study`); rows go to ``DIR/rows/`` (Parquet) as they
+finish, and a rerun into the same DIR skips the finished cells. The report
+(``DIR/report/``) is written at the end; ``--report-only DIR`` rebuilds it from the
+stored rows. Progress goes to standard error, the outcome and the files written to
+standard output.
 """
 
 from __future__ import annotations
@@ -12,14 +14,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rich.console import Console
-
-from ..errors import UserError
-from ..studies.cell import ROW_COLUMNS, cell_row, run_cell
-from ..studies.cells import expand
-from ..studies.engine import dask_client, run_tasks
-from ..studies.spec import load_study
-from ..studies.store import RowStore
+from . import render
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -31,40 +26,32 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--workers", type=int, default=2, help="local worker processes (default: 2)")
     parser.add_argument("--csv", action="store_true", help="also write DIR/rows.csv")
     parser.add_argument("--report-only", type=Path, metavar="DIR", help="rebuild DIR/report/ from stored rows")
+    render.add_json_argument(parser, "the outcome, the files written and every row")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    console = Console()
+    from ..api import study
+
+    progress = render.progress_console()
     if args.report_only is not None:
-        if not (args.report_only / "rows").is_dir():
-            raise UserError(f"{args.report_only}: no study results here (no rows/ folder)")
-        _report(console, RowStore(args.report_only, ROW_COLUMNS, "cell_id"))
-        return 0
-    if args.spec is None:
-        raise UserError("study: give a SPEC.toml (or --report-only DIR)")
-    if args.workers < 1:
-        raise UserError(f"--workers must be at least 1, got {args.workers}")
-    study = load_study(args.spec)
-    cells = expand(study)
-    if not cells:
-        raise UserError(f"{args.spec}: the spec has no cells (none = false and no effects or pairs)")
-    folder = args.output or Path(f"study-{study.name}")
-    store = RowStore(folder, ROW_COLUMNS, "cell_id")
-    where = args.scheduler or f"a local cluster of {args.workers} worker{'s' if args.workers != 1 else ''}"
-    console.print(f"study {study.name}: {len(cells)} cells on {where}, rows in {store.rows_folder}")
-    outcome = run_tasks(lambda: dask_client(args.scheduler, args.workers), run_cell, cells,
-                        [cell.id for cell in cells], store, error_row=cell_row, label="cells")
-    console.print(f"{outcome.submitted} cells run ({outcome.skipped} already done), {outcome.failed} failed, "
-                  f"{outcome.wall_s:.1f} s ({outcome.cells_per_minute:.2f} cells/min)")
-    if args.csv:
-        console.print(f"wrote {store.write_csv()}")
-    _report(console, store)
+        result = study(output=args.report_only, report_only=True)
+    else:
+        result = study(args.spec, args.output, workers=args.workers, scheduler=args.scheduler, csv=args.csv,
+                       progress=lambda line: progress.print(line, markup=False, highlight=False))
+    console = render.console_for(args)
+    outcome = result.outcome
+    if outcome is not None:
+        console.print(f"{outcome.submitted} cells run ({outcome.skipped} already done), {outcome.failed} failed, "
+                      f"{outcome.wall_s:.1f} s ({outcome.cells_per_minute:.2f} cells/min)")
+    for path in ([result.csv] if result.csv else []) + list(result.report):
+        console.print(f"wrote {render.plain(path)}")
+    if args.json:
+        render.write_json(args.json, {
+            "study": result.name, "folder": str(result.folder),
+            "outcome": None if outcome is None else {"run": outcome.submitted, "skipped": outcome.skipped,
+                                                     "failed": outcome.failed, "wall_s": outcome.wall_s},
+            "files": [str(path) for path in ([result.csv] if result.csv else []) + list(result.report)],
+            "rows": [render.json_row(row) for row in result.rows.to_dict("records")]})
     return 0
 
-
-def _report(console: Console, store: RowStore) -> None:
-    from ..studies.report import write_report
-
-    for path in write_report(store.table(), store.folder / "report"):
-        console.print(f"wrote {path}")

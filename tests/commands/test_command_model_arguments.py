@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from hydrojet_bench import commands
+from hydrojet_bench import api, commands
 from hydrojet_bench.cli import COMMAND_MODULES, build_parser
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.model_choice import ModelDefaults, choose_model
@@ -61,11 +61,15 @@ def test_every_command_that_takes_a_model_takes_the_same_model_arguments():
 
 
 def test_no_command_resolves_a_model_itself():
+    # A command resolves its model with model_choice, or hands its options to the Python
+    # API, which resolves them with choose_model.
+    assert "read_parameter_file" not in inspect.getsource(api) and "build_model" not in inspect.getsource(api)
+    assert "choose_model(" in inspect.getsource(api)
     for name in COMMAND_MODULES:
         source = inspect.getsource(__import__(f"{commands.__name__}.{name}", fromlist=["run"]))
         assert "read_parameter_file" not in source and "build_model" not in source, name
         if name in MODEL_COMMANDS:
-            assert "model_choice(" in source, name
+            assert "model_choice(" in source or "from ..api import" in source, name
 
 
 # A parameter file lists everything calibrate fits; these are the nominal values.

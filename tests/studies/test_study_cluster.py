@@ -71,7 +71,7 @@ def test_study_runs_on_a_scheduler_by_address(cluster: str, tiny_spec: Path, tmp
     out = tmp_path / "out"
     result = run_study(str(tiny_spec), "-o", str(out), "--scheduler", cluster)
     assert result.returncode == 0, result.stderr
-    assert cluster in " ".join(result.stdout.split())
+    assert cluster in " ".join(result.stderr.split())  # the start line is progress: standard error
     rows = stored_rows(out)
     assert len(rows) == 4 and rows["error"].isna().all()
     assert sorted(rows["verdict"]) == ["jet_gain", "jet_gain", "none", "none"]

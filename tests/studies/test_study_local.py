@@ -3,6 +3,7 @@ with its error while the others finish, the report written and rebuilt."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from study_helpers import run_study, stored_rows
@@ -24,6 +25,7 @@ def test_local_cluster_records_every_cell_and_the_failing_one(spec_with_boom: Pa
     assert (good[good["truth"] == "jet_gain"]["verdict"] == "jet_gain").all()
     assert (good[good["truth"] == "none"]["verdict"] == "none").all()
     assert "6 cells run (0 already done), 2 failed" in " ".join(result.stdout.split())
+    assert "study " in result.stderr and "study " not in result.stdout  # progress on standard error
     assert (out / "rows.csv").read_text().count("\n") == 7
     report = out / "report"
     for name in ("confusion.png", "power.png", "plans.png", "summary.md"):
@@ -32,6 +34,9 @@ def test_local_cluster_records_every_cell_and_the_failing_one(spec_with_boom: Pa
     assert "| jet_gain | 2 | 0 |" in summary and "boom inside the twin" in summary
 
     (report / "summary.md").unlink()
-    rebuilt = run_study("--report-only", str(out))
+    rebuilt = run_study("--report-only", str(out), "--json", "-")
     assert rebuilt.returncode == 0, rebuilt.stderr
     assert (report / "summary.md").read_text() == summary
+    document = json.loads(rebuilt.stdout)  # the JSON alone on standard output
+    assert document["outcome"] is None and len(document["rows"]) == 6
+    assert str(report / "summary.md") in document["files"] and f"wrote {report / 'summary.md'}" in rebuilt.stderr

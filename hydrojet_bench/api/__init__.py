@@ -1,0 +1,276 @@
+"""The bench from Python (a notebook, a script): the analysis commands as functions.
+
+    import hydrojet_bench as hj
+
+    data = hj.load("sessions/mystery.mcap")          # or a CSV file (profile "sim" by default)
+    found = hj.diagnose(data)                         # which effect is missing?
+    before = hj.calibrate(data)
+    after = hj.calibrate(data, effects=[found.verdict])
+    result = hj.compare(data, after, baseline=before, online=True)
+    result.to_pandas()                                # one row per step and method
+    result.plot()
+
+Each function does what the command of the same name does, on the same library code
+(`inputs`, `model_choice`, `estimation`, `analysis`, `bench.replay`, `studies`), and
+returns a typed result (`api.results`) with ``to_pandas()`` and ``plot()``. Models and
+effects are chosen by the commands' rule (`model_choice`): ``params`` (a parameter file,
+or a `CalibrateResult`) brings its model and effects, ``model`` replaces the model and
+``effects`` are added. A mistake in the inputs raises `hydrojet_bench.errors.UserError`
+naming the file and field; nothing here prints (progress, when asked for, goes to a
+``progress`` callback) or exits.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..analysis.compare import compare_methods, compare_steps
+from ..analysis.diagnosis import DiagnosisSettings, diagnose as run_diagnosis
+from ..analysis.diagnosis.noise import repeatability_floor
+from ..bench.replay import live_difference_deg, logged_steps, read_session, replay as replay_session
+from ..effects import load_effect
+from ..errors import ConvergenceError, UserError
+from ..estimation import OnlineSettings
+from ..data.dataset import Dataset
+from ..estimation.calibration import (DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, CalibrationResult, calibrate_dataset,
+                                      fit_mask, rows_that_identify)
+from ..inputs import load_dataset
+from ..logs.condition import log_condition
+from ..model_choice import COSSERAT, ModelChoice, ModelDefaults, choose_model
+from ..params_io import ParameterFile, effect_specs
+from ..profile import RigProfile
+from .results import (CalibrateResult, CompareResult, DiagnoseResult, Measurements, ReplayResult, StudyResult)
+
+__all__ = ["CalibrateResult", "CompareResult", "DiagnoseResult", "Measurements", "ReplayResult", "StudyResult",
+           "calibrate", "calibration_parameter_file", "compare", "diagnose", "load", "replay", "study"]
+
+Data = str | Path | Measurements
+Profile = RigProfile | str | Path | None
+Params = str | Path | CalibrateResult | None
+
+
+def load(path: str | Path, profile: Profile = None) -> Measurements:
+    """Read measurements: a CSV file (`hydrojet_bench.data.csv_io`'s columns) recorded on
+    ``profile`` (a `RigProfile`, a TOML path or a shipped name; default ``"sim"``), or a
+    session log (.mcap) that carries its own profile (``profile`` overrides it)."""
+    path = Path(path)
+    if profile is None and path.suffix.lower() != ".mcap":
+        profile = "sim"
+    dataset = load_dataset(path, profile)
+    return Measurements(path, dataset.profile, dataset.quasistatic_steps(), _log_damage(path))
+
+
+def calibrate(data: Data, *, model: str | None = None, effects: Sequence[str] = (), params: Params = None,
+              fit_on: str | None = None, position_weight_rad_per_m: float = DEFAULT_POSITION_WEIGHT_RAD_PER_M,
+              profile: Profile = None) -> CalibrateResult:
+    """Fit E0, EL, L, w_d and the parameters of ``effects``, as `hydrojet-bench
+    calibrate`, on the rows that identify them (``fit_on``: "calibration", the paper's
+    sec. V-B poses of sweep -1; "sweeps"; "all"; default: the poses, and all when an
+    effect is identified only by sweeps, `Effect.identified_by`). ``params`` only
+    chooses the model and effects here; the fit starts from the profile's values.
+    `CalibrateResult.save(path)` writes the parameter file."""
+    if not position_weight_rad_per_m >= 0:
+        raise UserError(f"position_weight_rad_per_m must be >= 0, got {position_weight_rad_per_m}")
+    if fit_on is not None and fit_on not in FIT_ON:
+        raise UserError(f"fit_on must be one of {', '.join(FIT_ON)}, got {fit_on!r}")
+    measurements = _measurements(data, profile)
+    choice = _choice(model, effects, params)
+    steps = measurements.steps
+    fit_on = fit_on or rows_that_identify(choice.requested)
+    rows = fit_mask(steps, fit_on)
+    if not rows.any():
+        raise UserError(f"{measurements.path}: no rows to fit on with fit_on={fit_on!r}; record calibration poses "
+                        "with `hydrojet-bench run --plan calibration` and sweeps with `--plan sweeps`")
+    try:
+        fit = calibrate_dataset(choice.model, steps, measurements.profile.model_parameters(),
+                                choice.calibration_names, fit_on=fit_on,
+                                position_weight_rad_per_m=position_weight_rad_per_m)
+    except ValueError as error:
+        raise UserError(f"{measurements.path}: {error}") from None
+    content = calibration_parameter_file(choice.model.name, effect_specs(choice.model.effects, Path.cwd()), fit,
+                                         measurements.path, measurements.profile, fit_on, steps, rows)
+    return CalibrateResult(choice.model, choice.effect_specs, steps.select(rows), fit, content)
+
+
+def calibration_parameter_file(model: str, effects: Sequence[str], fit: CalibrationResult, data: Path,
+                               profile: RigProfile, fit_on: str, steps: Dataset, rows: np.ndarray) -> ParameterFile:
+    """The parameter file of a calibration on ``rows`` of ``steps`` (chosen by
+    ``fit_on``), with its provenance (data, profile, rows fitted, RMS orientation error
+    before and after, deg). ``effects``: specs as the file lists them (`effect_specs`)."""
+    return ParameterFile(
+        model=model, effects=tuple(effects),
+        parameters=dict(zip(fit.names, map(float, fit.values))),
+        standard_errors=dict(zip(fit.names, map(float, fit.standard_errors))),
+        calibration={"data": str(data), "profile": profile.source, "fit_on": fit_on,
+                     "poses": int(np.sum(rows & (steps.sweep == -1))),
+                     "sweep_steps": int(np.sum(rows & (steps.sweep >= 0))),
+                     "rms_orientation_deg_before": round(fit.rms_orientation_deg_before, 4),
+                     "rms_orientation_deg_after": round(fit.rms_orientation_deg_after, 4)})
+
+
+def compare(data: Data, params: Params, *, baseline: Params = None, online: bool = False, model: str | None = None,
+            effects: Sequence[str] = (), profile: Profile = None) -> CompareResult:
+    """Predict every validation step (sweep >= 0; all steps when there are no sweeps)
+    with ``params`` ("ref": calibrated, constant disturbance; with ``online``, also
+    "online": online disturbance estimation) and compare with the measurements, as
+    `hydrojet-bench compare`. ``baseline``: second parameters predicted on the same
+    steps with their own model and effects (``effects`` name their effect files)."""
+    path = _path(data)
+    profile = _profile(data, profile)
+    # A session log's own settled steps are the rows its live estimator predicted.
+    logged = logged_steps(path, profile) if path.suffix.lower() == ".mcap" else None
+    steps = logged if logged is not None else _measurements(data, profile).steps
+    validation = steps.select(steps.sweep >= 0) if (steps.sweep >= 0).any() else steps
+    if len(validation) == 0:
+        raise UserError(f"{path}: no steps to compare")
+    settings = OnlineSettings() if online else None
+
+    def evaluate(choice: ModelChoice):
+        return compare_methods(choice.model, choice.parameters(steps.profile.model_parameters()), validation, settings)
+
+    after_choice = _choice(model, effects, params)
+    before = None if baseline is None else evaluate(_choice(model, (), baseline, effect_files=effects))
+    return CompareResult(after_choice.model, _source(params), validation, evaluate(after_choice), before,
+                         _log_damage(path))
+
+
+def diagnose(data: Data, *, model: str | None = None, effects: Sequence[str] = (), candidates: Sequence[str] = (),
+             workers: int | None = None, profile: Profile = None,
+             progress: Callable[[str], None] | None = None) -> DiagnoseResult:
+    """Which physical effect is the model missing? As `hydrojet-bench diagnose`: the
+    baseline (``model`` with the known ``effects``) and the baseline plus each of
+    ``candidates`` (default: every library effect not known) calibrated on part of the
+    steps and scored on the held-out repetitions against the noise floor."""
+    if workers is not None and workers < 1:
+        raise UserError(f"workers must be at least 1, got {workers}")
+    choice = _choice(model, effects, None)
+    tried = tuple(load_effect(spec) for spec in dict.fromkeys(candidates)) or None
+    measurements = _measurements(data, profile)
+    # Without repeated sweeps the raw samples' scatter is the only noise floor left.
+    samples = (load_dataset(measurements.path, measurements.profile)
+               if repeatability_floor(measurements.steps) is None else None)
+    try:
+        diagnosis = run_diagnosis(measurements.steps, choice.model.name, choice.requested, tried, samples=samples,
+                                  settings=DiagnosisSettings(workers=workers), progress=progress)
+    except ConvergenceError as error:
+        raise UserError(f"{measurements.path}: the baseline {choice.model.name} model cannot follow these data "
+                        f"({error}); check the profile and the units of the jet forces") from None
+    return DiagnoseResult(diagnosis, measurements.path, measurements.log_damage)
+
+
+def replay(log: str | Path, *, model: str | None = None, effects: Sequence[str] = (), params: Params = None,
+           online: bool = False, profile: Profile = None) -> ReplayResult:
+    """Re-run a session log's estimation offline, as `hydrojet-bench replay`. With the
+    live model and parameters (the default) it reproduces the live estimates
+    (``live_difference_deg`` 0); another model or effects without ``params`` are first
+    calibrated on the logged calibration poses."""
+    session = read_session(Path(log), profile)
+    choice = _choice(model, effects, params, ModelDefaults(session.model_name, session.effects))
+    nominal = session.profile.model_parameters()
+    values = None if params is None else choice.parameters(nominal)
+    live_settings = values is None and choice.model.name == session.model_name and not effects
+    calibration = None
+    if values is None and not live_settings:
+        try:
+            calibration = calibrate_dataset(choice.model, session.steps, nominal, choice.calibration_names)
+        except (ValueError, ConvergenceError) as error:
+            raise UserError(f"{log}: cannot calibrate {choice.model.name} on the logged calibration poses: "
+                            f"{error}") from None
+        values = calibration.params
+    estimates = replay_session(session, choice.model, OnlineSettings() if online else None, values)
+    kept = [i for i, estimate in enumerate(estimates) if estimate is not None]
+    validation = [i for i in kept if session.steps.sweep[i] >= 0] or kept
+    if not validation:
+        raise UserError(f"{log}: the model converged on none of the logged steps")
+    steps = session.steps.select(validation)
+    results = compare_steps([estimates[i] for i in validation], steps)
+    difference = live_difference_deg(session, estimates) if live_settings else None
+    return ReplayResult(choice.model, steps, results, live_settings, difference, calibration,
+                        len(session.steps.calibration_rows()), len(estimates) - len(kept), _log_damage(Path(log)))
+
+
+def study(spec: str | Path | None = None, output: str | Path | None = None, *, workers: int = 2,
+          scheduler: str | None = None, csv: bool = False, report_only: bool = False,
+          progress: Callable[[str], None] | None = None) -> StudyResult:
+    """Run a study spec (`studies.spec`) on Dask, as `hydrojet-bench study`: every cell
+    simulated on the twin and diagnosed, rows stored under ``output`` (default
+    ``study-<name>``; a rerun skips the finished cells), then the report written to
+    ``output/report``. ``report_only``: rebuild the report from the rows stored in
+    ``output`` without running anything. ``progress`` receives one line on start."""
+    from ..studies.cell import ROW_COLUMNS, cell_row, run_cell
+    from ..studies.cells import expand
+    from ..studies.engine import dask_client, run_tasks
+    from ..studies.report import write_report
+    from ..studies.spec import load_study
+    from ..studies.store import RowStore
+
+    if report_only:
+        if output is None or not (Path(output) / "rows").is_dir():
+            raise UserError(f"{output}: no study results here (no rows/ folder)")
+        store = RowStore(Path(output), ROW_COLUMNS, "cell_id")
+        rows = store.table()
+        return StudyResult(Path(output).name, store.folder, rows, None,
+                           tuple(write_report(rows, store.folder / "report")))
+    if spec is None:
+        raise UserError("study: give a SPEC.toml (or report_only with the result folder)")
+    if workers < 1:
+        raise UserError(f"workers must be at least 1, got {workers}")
+    plan = load_study(Path(spec))
+    cells = expand(plan)
+    if not cells:
+        raise UserError(f"{spec}: the spec has no cells (none = false and no effects or pairs)")
+    store = RowStore(Path(output) if output is not None else Path(f"study-{plan.name}"), ROW_COLUMNS, "cell_id")
+    if progress is not None:
+        where = scheduler or f"a local cluster of {workers} worker{'s' if workers != 1 else ''}"
+        progress(f"study {plan.name}: {len(cells)} cells on {where}, rows in {store.rows_folder}")
+    outcome = run_tasks(lambda: dask_client(scheduler, workers), run_cell, cells, [cell.id for cell in cells],
+                        store, error_row=cell_row, label="cells")
+    written_csv = store.write_csv() if csv else None
+    rows = store.table()
+    return StudyResult(plan.name, store.folder, rows, outcome, tuple(write_report(rows, store.folder / "report")),
+                       written_csv)
+
+
+# --- inputs --------------------------------------------------------------------------
+
+
+def _path(data: Data) -> Path:
+    return data.path if isinstance(data, Measurements) else Path(data)
+
+
+def _profile(data: Data, profile: Profile) -> Profile:
+    return data.profile if isinstance(data, Measurements) and profile is None else profile
+
+
+def _measurements(data: Data, profile: Profile) -> Measurements:
+    if isinstance(data, Measurements) and profile is None:
+        return data
+    return load(_path(data), profile)
+
+
+def _log_damage(path: Path) -> dict | None:
+    if path.suffix.lower() != ".mcap":
+        return None
+    condition = log_condition(path)
+    return None if condition.whole else condition.as_dict()
+
+
+def _choice(model: str | None, effects: Sequence[str], params: Params, defaults: ModelDefaults = COSSERAT, *,
+            effect_files: Sequence[str] | None = None) -> ModelChoice:
+    """The commands' model rule; a `CalibrateResult` brings its model and effects as its
+    parameter file would (its effect files among them)."""
+    if not isinstance(params, CalibrateResult):
+        return choose_model(model, tuple(effects), None if params is None else Path(params), defaults,
+                            effect_files=effect_files)
+    files = [*params.effect_specs, *(effects if effect_files is None else effect_files)]
+    return choose_model(model, tuple(effects), _source(params), defaults, effect_files=files,
+                        parameter_file=params.parameter_file)
+
+
+def _source(params: Params) -> str:
+    if isinstance(params, CalibrateResult):
+        return f"the calibration on {params.parameter_file.calibration.get('data', 'its data')}"
+    return str(params)
