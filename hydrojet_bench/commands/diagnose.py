@@ -24,6 +24,7 @@ from ..errors import ConvergenceError, UserError
 from ..model_choice import COSSERAT, ModelChoice, model_choice
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
+from .figure_options import add_format_argument
 from .log_notice import warn_if_incomplete
 
 
@@ -37,7 +38,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--workers", type=int, default=None,
                         help="processes for the candidate fits (default: up to 2)")
     render.add_json_argument(parser, "the diagnosis")
-    parser.add_argument("--report", type=Path, metavar="DIR", help="write figures (PNG) to this folder")
+    parser.add_argument("--report", type=Path, metavar="DIR", help="write figures to this folder")
+    add_format_argument(parser)
     parser.epilog = ("--effect names effects known to be present: they join the baseline (gravity at its nominal "
                      "weight, E0, EL, L, w_d) and are calibrated with it. Every --candidate is then tried on top.")
     parser.set_defaults(func=run)
@@ -58,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from ..analysis.diagnosis.plots import write_diagnosis_report
 
-        for path in write_diagnosis_report(args.report, diagnosis):
+        for path in write_diagnosis_report(args.report, diagnosis, args.figure_format):
             console.print(f"wrote {render.plain(path)}")
     return 0
 

@@ -19,6 +19,7 @@ from ..estimation import OnlineSettings
 from ..estimation.calibration import calibrate_dataset
 from ..model_choice import ModelDefaults, model_choice
 from . import render
+from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
 from .log_notice import warn_if_incomplete
 
@@ -30,6 +31,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         params="the parameters to replay with (default: the live ones)")
     parser.add_argument("--online", action="store_true", help="online disturbance estimation, as live")
     parser.add_argument("--report", type=Path, metavar="DIR", help="write figures to this folder")
+    add_format_argument(parser)
     parser.set_defaults(func=run)
 
 
@@ -73,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from ..analysis.report import write_report
 
-        for path in write_report(args.report, results, steps, model.name):
+        for path in write_report(args.report, results, steps, model.name,
+                                 figure_format=args.figure_format):
             console.print(f"wrote {render.plain(path)}")
     missed = len(estimates) - len(kept)
     if missed:
