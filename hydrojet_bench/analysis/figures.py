@@ -2,8 +2,8 @@
 
 Figures are made with `subplots` (constrained layout, the style below applied while the
 figure is built) and written with `save` in the format its path names: PNG for a quick
-look, SVG or PDF for a paper (`--format`). Vector files carry no creation date, so the
-same session writes the same bytes.
+look, SVG or PDF for a paper (`--format`). Vector files carry no creation date and fixed
+element ids, so the same session writes the same bytes.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ STYLE = {
     "axes.spines.top": False, "axes.spines.right": False,
     "lines.linewidth": 1.2, "lines.markersize": 3.5, "legend.framealpha": 0.9,
     "savefig.bbox": "tight", "savefig.pad_inches": 0.05,
+    "svg.hashsalt": "hydrojet-bench",  # fixed SVG element ids: reruns write the same file
 }
 # Vector files without a date: reruns give identical files.
 _NO_DATE = {"svg": {"Date": None}, "pdf": {"CreationDate": None}}
@@ -70,6 +71,12 @@ def sweep_boundaries(axis, sweep: np.ndarray) -> None:
     """Vertical grey lines between consecutive sweeps on a step-index axis."""
     for boundary in np.flatnonzero(np.diff(sweep)) + 0.5:
         axis.axvline(boundary, color="0.75", linewidth=0.8, zorder=1)
+
+
+def figure_legend(figure, handles, **options) -> None:
+    """One legend for the whole figure, in a row under the panels (never over a title)."""
+    options = {"ncols": min(len(handles), 6), **options}
+    figure.legend(handles=handles, loc="outside lower center", **options)
 
 
 def create_folder(folder: Path) -> None:

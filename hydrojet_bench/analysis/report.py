@@ -13,8 +13,8 @@ from matplotlib.lines import Line2D
 from ..data.dataset import Dataset
 from .breakdowns import LOADING, MISSING_LABEL, UNLOADING, driving_jet_labels, load_phases, orientation_residuals_deg
 from .compare import Comparison, measured_bend_deg
-from .figures import (create_folder, save, styled, subplots, sweep_boundaries, sweep_colour, sweep_marker,
-                      zero_line)
+from .figures import (create_folder, figure_legend, save, styled, subplots, sweep_boundaries, sweep_colour,
+                      sweep_marker, zero_line)
 
 LABELS = {"ref": "Ref. (constant disturbance)", "online": "Proposed (online estimation)"}
 SHORT_LABELS = {"ref": "Ref.", "online": "Proposed"}
@@ -125,14 +125,14 @@ def tip_paths_figure(results: dict[str, Comparison], steps: Dataset, model_name:
                 error_axis.plot(index[rows], error[rows], color=sweep_colour(sweep), marker=sweep_marker(sweep),
                                 markersize=3, fillstyle="full" if key == "online" else "none", **style)
     sweep_boundaries(error_axis, steps.sweep)
-    error_axis.set_xlabel("step (sweeps separated by grey lines)")
+    error_axis.set_xlabel("validation step, in session order (grey lines separate the sweeps)")
     error_axis.set_ylabel("tip position error (mm)" if position else "tip orientation error (deg)")
     error_axis.set_ylim(bottom=0.0)
     error_axis.set_title("error at each step: Ref. (dashed, hollow markers) and Proposed (solid, filled)")
     methods = [Line2D([], [], color="0.3", linestyle="none", marker="o", fillstyle="none", label="measured tip")]
     methods += [Line2D([], [], color="0.3", label=LABELS[key], **{k: v for k, v in style.items() if k != "zorder"})
                 for key, style in METHOD_STYLE.items() if key in results]
-    figure.legend(handles=methods + _sweep_handles(names), loc="outside right upper", title="tip position")
+    figure_legend(figure, methods + _sweep_handles(names))
     figure.suptitle(f"{model_name}: measured and predicted tip paths, one colour and marker per sweep")
     return figure
 
@@ -147,6 +147,7 @@ def error_boxes_figure(results: dict[str, Comparison], model_name: str):
     columns = (("orientation error (deg)", "tip orientation", [results[k].orientation_error_deg for k in keys]),
                ("position error (mm)", "tip position", [results[k].position_error_mm for k in keys]))
     for axis, (unit, title, values) in zip(axes, columns):
+        axis.set_xlabel("method")
         axis.set_ylabel(unit)
         axis.set_title(title)
         if any(v is None for v in values):
@@ -156,9 +157,9 @@ def error_boxes_figure(results: dict[str, Comparison], model_name: str):
         axis.boxplot(values, tick_labels=labels, showmeans=True, medianprops={"color": "k"},
                      meanprops={"marker": "D", "markerfacecolor": "white", "markeredgecolor": "k"})
         _log_if_wide(axis, [float(np.median(v)) for v in values])
-    figure.legend(handles=[Line2D([], [], color="k", label="median"),
+    figure_legend(figure, [Line2D([], [], color="k", label="median"),
                            Line2D([], [], linestyle="none", marker="D", markerfacecolor="white",
-                                  markeredgecolor="k", label="mean")], loc="outside right upper")
+                                  markeredgecolor="k", label="mean")])
     figure.suptitle(f"{model_name}: error distribution over the sweeps (box: quartiles, whiskers: 1.5 IQR)")
     return figure
 
@@ -201,7 +202,7 @@ def residuals_figure(key: str, comparison: Comparison, steps: Dataset, model_nam
             zero_line(axis)
     if limits is not None:
         axes[0, 0].set_ylim(*limits)
-    figure.legend(handles=_sweep_handles(names) + _pass_handles(), loc="outside right upper")
+    figure_legend(figure, _sweep_handles(names) + _pass_handles())
     figure.suptitle(f"{model_name}, {LABELS[key]}: orientation error as a rotation vector "
                     "(R_pred^T R_meas, tip frame); same y scale for every method")
     return figure
@@ -248,7 +249,7 @@ def disturbance_figure(online: Comparison, steps: Dataset, model_name: str):
         axis.set_ylabel("disturbance moment (mN m)")
     handles = [Line2D([], [], color=colours[c], marker=".", label=f"m_{c} (tip frame)") for c in COMPONENTS]
     handles.append(Line2D([], [], color="k", marker="o", markersize=3, linewidth=1.5, label="norm |m|"))
-    figure.legend(handles=handles + _pass_handles(), loc="outside right upper")
+    figure_legend(figure, handles + _pass_handles())
     figure.suptitle(f"{model_name}: {MISSING_LABEL}: the online disturbance moment against jet force, per sweep")
     return figure
 
@@ -279,6 +280,7 @@ def before_after_rmse_figure(before: dict[str, Comparison], after: dict[str, Com
                                  edgecolor=f"C{index // 2}", linewidth=0.6)
             axis.bar_label(container, fmt="%.2g", fontsize=6.5, padding=1.5, rotation=90)
         axis.set_xticks(x, groups)
+        axis.set_xlabel("sweeps (RMS over each sweep's steps)")
         axis.set_ylabel(unit)
         axis.set_title(title)
         if not heights:
@@ -289,8 +291,7 @@ def before_after_rmse_figure(before: dict[str, Comparison], after: dict[str, Com
             axis.set_ylim(min(heights) / 2.0, max(heights) * 6.0)  # room for the rotated labels
         else:
             axis.set_ylim(0.0, max(heights) * 1.3)
-    handles, labels = axes[0].get_legend_handles_labels()
-    figure.legend(handles, labels, loc="outside right upper")
+    figure_legend(figure, axes[0].get_legend_handles_labels()[0])
     figure.suptitle(f"{model_name}: RMS errors before (pale, hatched) and after (solid) the change")
     return figure
 
@@ -317,7 +318,7 @@ def before_after_disturbance_figure(before: Comparison, after: Comparison, steps
     all_norms = np.concatenate(list(norms.values()))
     if all_norms.min() > 0.0 and all_norms.max() > LOG_RATIO * all_norms.min():
         axis.set_yscale("log")
-    axis.set_xlabel("step (sweeps separated by grey lines)")
+    axis.set_xlabel("validation step, in session order (grey lines separate the sweeps)")
     axis.set_ylabel("disturbance moment norm (mN m)" + (", log scale" if axis.get_yscale() == "log" else ""))
     axis.legend(title="parameters", loc="upper right")
     figure.suptitle(f"{model_name}: {MISSING_LABEL}: the online disturbance moment before and after the change")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .figures import create_folder, save, styled, subplots, zero_line
+from .figures import create_folder, figure_legend, save, styled, subplots, zero_line
 from .sensors import AXES, SensorAgreement, hold_label
 
 
@@ -87,14 +87,14 @@ def static_holds_figure(agreement: SensorAgreement):
                   label="|mean heading error|")
         axis.set_xticks(positions, [hold_label(h) for h in holds], rotation=30 if len(holds) > 8 else 0,
                         ha="right" if len(holds) > 8 else "center")
-        axis.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
+        figure_legend(figure, axis.get_legend_handles_labels()[0], ncols=1)
     else:
         axis.text(0.5, 0.5, f"no hold of {agreement.min_hold_s:g} s or more", ha="center",
                   transform=axis.transAxes)
     axis.set_xlabel("static hold (calibration pose, or sweep and step)")
     axis.set_ylabel("angle between IMU and EM (deg)")
-    axis.set_title(f"each hold's settled window: from {agreement.settle_s:g} s after its command, past the rod's "
-                   "and the fusion filter's transient, to its end")
+    axis.set_title(f"settled windows only: the first {agreement.settle_s:g} s of each hold\n"
+                   "(rod and fusion-filter transient) left out")
     figure.suptitle("Static accuracy of the IMUs against the EM tracker")
     return figure
 

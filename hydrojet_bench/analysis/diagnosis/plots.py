@@ -8,7 +8,7 @@ import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from ..figures import create_folder, save, styled, subplots, sweep_boundaries, zero_line
+from ..figures import create_folder, figure_legend, save, styled, subplots, sweep_boundaries, zero_line
 from .engine import NONE, Diagnosis
 
 VERDICT_COLOUR, QUALIFIES_COLOUR, OTHER_COLOUR = "C2", "C0", "0.65"
@@ -47,7 +47,7 @@ def ranking_figure(diagnosis: Diagnosis):
     axis.set_xlim(0.0, max([diagnosis.baseline_heldout_rmse_deg] + [c.heldout_orientation_rmse_deg for c in ranked])
                   * 1.15)
     axis.grid(axis="y", visible=False)
-    figure.legend(handles=handles, loc="outside right upper")
+    figure_legend(figure, handles)
     axis.set_title(f"{diagnosis.model}: held-out error of the baseline plus each candidate; "
                    f"verdict: {diagnosis.verdict}")
     return figure
