@@ -309,7 +309,7 @@ def before_after_disturbance_figure(before: Comparison, after: Comparison, steps
         for number, sweep in enumerate(np.unique(steps.sweep)):
             rows = np.flatnonzero(steps.sweep == sweep)
             axis.plot(index[rows], norms[when][rows], marker=".", markersize=3, linewidth=1.1,
-                      label=None if number else when, **style)
+                      label=None if number else f"{when} the change", **style)
     sweep_boundaries(axis, steps.sweep)
     for sweep, name in sweep_names(steps).items():
         middle = float(np.mean(np.flatnonzero(steps.sweep == sweep)))
@@ -320,6 +320,6 @@ def before_after_disturbance_figure(before: Comparison, after: Comparison, steps
         axis.set_yscale("log")
     axis.set_xlabel("validation step, in session order (grey lines separate the sweeps)")
     axis.set_ylabel("disturbance moment norm (mN m)" + (", log scale" if axis.get_yscale() == "log" else ""))
-    axis.legend(title="parameters", loc="upper right")
+    figure_legend(figure, axis.get_legend_handles_labels()[0], title="parameters")
     figure.suptitle(f"{model_name}: {MISSING_LABEL}: the online disturbance moment before and after the change")
     return figure
