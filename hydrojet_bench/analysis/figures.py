@@ -8,6 +8,7 @@ element ids, so the same session writes the same bytes.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -50,11 +51,11 @@ def sweep_marker(sweep: int) -> str:
 def styled(draw: Callable[..., Any]) -> Callable[..., Any]:
     """Decorator: run a figure-drawing function under `STYLE`."""
 
+    @functools.wraps(draw)
     def wrapper(*args, **kwargs):
         with plt.rc_context(STYLE):
             return draw(*args, **kwargs)
 
-    wrapper.__doc__, wrapper.__name__ = draw.__doc__, draw.__name__
     return wrapper
 
 

@@ -41,7 +41,7 @@ def write_report(folder: Path, results: dict[str, Comparison], steps: Dataset, m
 
     paths = [save(tip_paths_figure(results, steps, model_name), path("tip_paths")),
              save(error_boxes_figure(results, model_name), path("error_boxes"))]
-    limits = _shared_limits([orientation_residuals_deg(c.predictions, steps) for c in results.values()])
+    limits = shared_limits([orientation_residuals_deg(c.predictions, steps) for c in results.values()])
     paths += [save(residuals_figure(key, comparison, steps, model_name, limits), path(f"residuals_{key}"))
               for key, comparison in results.items()]
     if "online" in results:
@@ -70,7 +70,15 @@ def passes(rows: np.ndarray, phases: np.ndarray) -> list[tuple[str, np.ndarray]]
     return [(str(phases[rows[a]]), rows[max(a - 1, 0):b]) for a, b in zip(starts, stops)]
 
 
-def _shared_limits(series: list[np.ndarray]) -> tuple[float, float]:
+def sweep_passes(steps: Dataset, sweep: int, phases: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """`passes` of a validation sweep; the calibration poses (sweep -1), in no order of
+    force, as one set of points ("poses", drawn unjoined)."""
+    rows = np.flatnonzero(steps.sweep == sweep)
+    return passes(rows, phases) if sweep >= 0 else [("poses", rows)]
+
+
+def shared_limits(series: list[np.ndarray]) -> tuple[float, float]:
+    """One y range (low, high) holding every series, padded by 6 %."""
     low = min(float(np.nanmin(s)) for s in series)
     high = max(float(np.nanmax(s)) for s in series)
     pad = 0.06 * max(high - low, 1e-9)
@@ -109,8 +117,11 @@ def tip_paths_figure(results: dict[str, Comparison], steps: Dataset, model_name:
                           markeredgewidth=0.7, alpha=0.8, zorder=2)
             for key, style in METHOD_STYLE.items():
                 if key in results:
+                    # Calibration poses follow no path: their predictions are points.
+                    unjoined = {"linestyle": "none", "marker": "+" if key == "ref" else "x"} if sweep < 0 else {}
                     predicted = results[key].predictions.tip_position_in_base_m
-                    axis.plot(predicted[rows, i] * 1e3, predicted[rows, j] * 1e3, color=colour, **style)
+                    axis.plot(predicted[rows, i] * 1e3, predicted[rows, j] * 1e3, color=colour,
+                              **{**style, **unjoined})
         axis.set_xlabel(f"tip {plane[0]} in the base frame (mm)")
         axis.set_ylabel(f"tip {plane[1]} in the base frame (mm)")
         axis.set_aspect("equal", adjustable="datalim")
@@ -125,7 +136,7 @@ def tip_paths_figure(results: dict[str, Comparison], steps: Dataset, model_name:
                 error_axis.plot(index[rows], error[rows], color=sweep_colour(sweep), marker=sweep_marker(sweep),
                                 markersize=3, fillstyle="full" if key == "online" else "none", **style)
     sweep_boundaries(error_axis, steps.sweep)
-    error_axis.set_xlabel("validation step, in session order (grey lines separate the sweeps)")
+    error_axis.set_xlabel("step, in session order (grey lines separate the sweeps)")
     error_axis.set_ylabel("tip position error (mm)" if position else "tip orientation error (deg)")
     error_axis.set_ylim(bottom=0.0)
     error_axis.set_title("error at each step: Ref. (dashed, hollow markers) and Proposed (solid, filled)")
@@ -185,7 +196,7 @@ def residuals_figure(key: str, comparison: Comparison, steps: Dataset, model_nam
     names = sweep_names(steps)
     figure, axes = subplots(2, 3, figsize=(13, 6.8), sharey=True)
     for sweep in names:
-        for phase, rows in passes(np.flatnonzero(steps.sweep == sweep), phases):
+        for phase, rows in sweep_passes(steps, sweep, phases):
             style = {"color": sweep_colour(sweep), "marker": sweep_marker(sweep), "markersize": 3.5,
                      "linewidth": 0.9, **PASS_STYLE.get(phase, {"linestyle": "none"})}
             for component in range(3):
@@ -230,13 +241,10 @@ def disturbance_figure(online: Comparison, steps: Dataset, model_name: str):
             jet = int(jets[in_sweep[0]].split()[1])
             force, xlabel = steps.jet_forces_n[:, jet - 1], f"jet {jet} force q{jet} (N)"
             title = f"sweep {sweep}: jet {jet} swept"
-            pieces = passes(in_sweep, phases)
         else:
             force, xlabel = steps.jet_forces_n.sum(axis=1), "total jet force q1+q2+q3 (N)"
             title = name
-            order = in_sweep[np.argsort(force[in_sweep], kind="stable")]
-            pieces = [("poses", order)]
-        for phase, rows in pieces:
+        for phase, rows in sweep_passes(steps, sweep, phases):
             style = PASS_STYLE.get(phase, {"linestyle": "none"})
             for component, label in enumerate(COMPONENTS):
                 axis.plot(force[rows], moment[rows, component], color=colours[label], marker=".", linewidth=1,
@@ -318,7 +326,7 @@ def before_after_disturbance_figure(before: Comparison, after: Comparison, steps
     all_norms = np.concatenate(list(norms.values()))
     if all_norms.min() > 0.0 and all_norms.max() > LOG_RATIO * all_norms.min():
         axis.set_yscale("log")
-    axis.set_xlabel("validation step, in session order (grey lines separate the sweeps)")
+    axis.set_xlabel("step, in session order (grey lines separate the sweeps)")
     axis.set_ylabel("disturbance moment norm (mN m)" + (", log scale" if axis.get_yscale() == "log" else ""))
     figure_legend(figure, axis.get_legend_handles_labels()[0], title="parameters")
     figure.suptitle(f"{model_name}: {MISSING_LABEL}: the online disturbance moment before and after the change")

@@ -15,7 +15,7 @@ from matplotlib.lines import Line2D
 from test_analysis_sensors import held_plan_samples
 
 from hydrojet_bench.analysis import report
-from hydrojet_bench.analysis.breakdowns import LOADING, UNLOADING, load_phases
+from hydrojet_bench.analysis.breakdowns import LOADING, UNLOADING, load_phases, orientation_residuals_deg
 from hydrojet_bench.analysis.compare import compare_methods
 from hydrojet_bench.analysis.diagnosis import diagnose
 from hydrojet_bench.analysis.figures import save
@@ -33,7 +33,7 @@ from hydrojet_bench.twin import DigitalTwin, TwinConfig
 CLOGGED_JET = f"{Path(__file__).resolve().parents[2] / 'docs/examples/clogged_jet.py'}:CloggedJet"
 # A quantity's unit in parentheses, or a label that counts or names things.
 UNIT = re.compile(r"\((deg|mm|min|N|mN m)[,)]")
-CATEGORICAL = ("IMU samples", "candidate effect", "static hold", "validation step", "held-out step", "sweeps",
+CATEGORICAL = ("IMU samples", "candidate effect", "static hold", "step, in session order", "held-out step", "sweeps",
                "method")
 
 
@@ -51,12 +51,12 @@ def session():
     profile = load_profile("sim")
     twin = DigitalTwin(TwinConfig.from_profile(profile, hidden_effects=(load_effect(CLOGGED_JET),), seed=4))
     plan = calibration_plan(6, seed=4) + validation_sweeps(steps_up=3, repetitions=1)
-    steps = twin.run_plan(plan, record_window_s=1.0).to_dataset(profile, "short twin").quasistatic_steps()
-    steps = steps.select(steps.sweep >= 0)
+    recorded = twin.run_plan(plan, record_window_s=1.0).to_dataset(profile, "short twin").quasistatic_steps()
+    steps = recorded.select(recorded.sweep >= 0)
     params = profile.model_parameters()
     before = compare_methods(build_model("cosserat", [])[0], params, steps, OnlineSettings())
     after = compare_methods(build_model("cosserat", [CLOGGED_JET])[0], params, steps, OnlineSettings())
-    return steps, before, after
+    return steps, before, after, recorded
 
 
 def labelled(figure) -> None:
@@ -83,7 +83,7 @@ def data_lines(axis) -> list[Line2D]:
 
 
 def test_tip_paths_tell_sweeps_and_methods_apart_with_lines_above_markers(session):
-    steps, _, after = session
+    steps, _, after, _ = session
     figure = report.tip_paths_figure(after, steps, "cosserat")
     labelled(figure)
     labels = legend_labels(figure)
@@ -102,9 +102,9 @@ def test_tip_paths_tell_sweeps_and_methods_apart_with_lines_above_markers(sessio
 
 
 def test_residual_passes_are_not_joined_and_methods_share_one_scale(session, tmp_path):
-    steps, before, _ = session
+    steps, before, _, _ = session
     phases = load_phases(steps)
-    limits = report._shared_limits([report.orientation_residuals_deg(c.predictions, steps)
+    limits = report.shared_limits([orientation_residuals_deg(c.predictions, steps)
                                     for c in before.values()])
     figures = {key: report.residuals_figure(key, comparison, steps, "cosserat", limits)
                for key, comparison in before.items()}
@@ -122,8 +122,25 @@ def test_residual_passes_are_not_joined_and_methods_share_one_scale(session, tmp
         assert down_rows[0] == up_rows[-1]  # the unloading pass starts at the turning point
 
 
+def test_calibration_poses_are_points_not_a_path(session):
+    """`replay` and `run` pass the calibration poses too: random poses, never joined."""
+    _, _, _, recorded = session
+    results = compare_methods(build_model("cosserat", [CLOGGED_JET])[0], load_profile("sim").model_parameters(),
+                              recorded, OnlineSettings())
+    poses = recorded.sweep < 0
+    figures = [report.tip_paths_figure(results, recorded, "cosserat"),
+               report.residuals_figure("online", results["online"], recorded, "cosserat"),
+               report.disturbance_figure(results["online"], recorded, "cosserat")]
+    for figure in figures:
+        labelled(figure)
+        assert "calibration poses" in legend_labels(figure) + [axis.get_title() for axis in figure.axes]
+    unjoined = [line for figure in figures[:2] for line in data_lines(figure.axes[0])
+                if len(line.get_xdata()) == poses.sum()]
+    assert unjoined and all(line.get_linestyle() == "None" for line in unjoined)
+
+
 def test_disturbance_is_against_each_panels_jet_force(session):
-    steps, _, after = session
+    steps, _, after, _ = session
     figure = report.disturbance_figure(after["online"], steps, "cosserat")
     labelled(figure)
     panels = [axis for axis in figure.axes if axis.get_visible()]
@@ -133,7 +150,7 @@ def test_disturbance_is_against_each_panels_jet_force(session):
 
 
 def test_before_after_bars_are_readable_fifty_times_smaller(session):
-    steps, before, after = session
+    steps, before, after, _ = session
     assert after["ref"].overall.orientation_rmse_deg < before["ref"].overall.orientation_rmse_deg / 20
     figure = report.before_after_rmse_figure(before, after, "cosserat")
     labelled(figure)
@@ -180,7 +197,7 @@ def test_diagnosis_figures_are_labelled(tmp_path):
 
 @pytest.mark.parametrize("fmt", FIGURE_FORMATS)
 def test_every_format_is_written_and_vector_files_carry_no_date(session, tmp_path, fmt):
-    _, before, after = session
+    _, before, after, _ = session
     first, second = (save(report.error_boxes_figure(after, "cosserat"), tmp_path / f"{name}.{fmt}")
                      for name in ("first", "second"))
     assert first.read_bytes().startswith({"png": b"\x89PNG", "svg": b"<?xml", "pdf": b"%PDF"}[fmt])
