@@ -36,13 +36,11 @@ calibrated, constant disturbance), with `analysis.compare`.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from ..config.schema import BaseTable, GravityTable
 from ..data.dataset import Dataset, average_quaternions
-from ..errors import UserError
 from ..estimation.online import OnlineSettings
 from ..estimation.path import ONLINE, PathPredictor, Predictions
 from ..geometry import quat_conjugate, quat_from_rotvec, quat_multiply, rotation_angle_deg, rotvec_from_quat
@@ -440,81 +438,7 @@ def compare_estimators(model: ShootingModel, params: ModelParameters, em_steps: 
 # --- report ---------------------------------------------------------------------------
 
 
-def write_sensor_report(folder: Path, agreement: SensorAgreement) -> list[Path]:
-    """Angle against time, per-axis components, static-hold bars and a histogram (PNG)
-    in ``folder`` (created if needed); returns their paths."""
-    from .report import _save, plt  # here: matplotlib is slow to import and only the report needs it
-
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise UserError(f"cannot create report folder {folder}: {error.strerror}") from None
-    aligned, difference = agreement.aligned, agreement.difference
-    minutes = aligned.time_s / 60.0
-
-    def shade_holds(axis) -> None:
-        for index, hold in enumerate(agreement.holds):
-            axis.axvspan(hold.start_s / 60.0, hold.end_s / 60.0, color="0.9", zorder=0,
-                         label="settled holds" if index == 0 else None)
-
-    paths = []
-    figure, axis = plt.subplots(figsize=(11, 4))
-    shade_holds(axis)
-    axis.plot(minutes, difference.angle_deg, ".", markersize=1.5, color="C0", label="IMU vs EM angle")
-    axis.set_xlabel("session time (min)")
-    axis.set_ylabel("angle (deg)")
-    axis.set_title(f"Tip orientation in the base frame, IMU against EM: RMS {agreement.overall.rms_deg:.2f} deg, "
-                   f"max {agreement.overall.max_deg:.2f} deg")
-    axis.legend(loc="upper left", markerscale=6)
-    figure.tight_layout()
-    paths.append(_save(figure, folder / "angle_vs_time.png"))
-
-    figure, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
-    for i, axis_name in enumerate(AXES):
-        axes[0].plot(minutes, difference.rotation_vector_deg[:, i], ".", markersize=1.5, color=f"C{i}",
-                     label=f"base {axis_name}")
-    axes[0].set_ylabel("error component (deg)")
-    axes[0].set_title("Error rotation vector (IMU relative to EM), base frame")
-    axes[1].plot(minutes, difference.heading_deg, ".", markersize=1.5, color="C3", label="heading (about up)")
-    axes[1].plot(minutes, difference.tilt_deg, ".", markersize=1.5, color="C4", label="tilt")
-    axes[1].set_ylabel("deg")
-    axes[1].set_xlabel("session time (min)")
-    for axis in axes:
-        shade_holds(axis)
-        axis.axhline(0.0, color="0.5", linewidth=0.5)
-        axis.legend(loc="upper left", markerscale=6)
-    figure.tight_layout()
-    paths.append(_save(figure, folder / "per_axis.png"))
-
-    figure, axis = plt.subplots(figsize=(max(6, 0.6 * len(agreement.holds) + 2), 4))
-    if agreement.holds:
-        labels = [f"{h.sweep}/{h.step}" for h in agreement.holds]
-        positions = np.arange(len(labels))
-        axis.bar(positions, [h.angle.mean_deg for h in agreement.holds], yerr=[h.sd_deg for h in agreement.holds],
-                 color="C0", capsize=3, label="mean angle +- SD")
-        axis.plot(positions, [h.bias_deg for h in agreement.holds], "x", color="k", label="bias (mean orientations)")
-        axis.plot(positions, [abs(h.mean_heading_deg) for h in agreement.holds], "o", color="C3",
-                  label="|mean heading|")
-        axis.set_xticks(positions, labels)
-        axis.legend(loc="best", fontsize="small", framealpha=0.9)
-    else:
-        axis.text(0.5, 0.5, f"no hold of {agreement.min_hold_s:g} s or more", ha="center", transform=axis.transAxes)
-    axis.set_xlabel("hold (sweep/step)")
-    axis.set_ylabel("angle (deg)")
-    axis.set_title(f"Static accuracy: settled part of each hold (after {agreement.settle_s:g} s)")
-    figure.tight_layout()
-    paths.append(_save(figure, folder / "static_holds.png"))
-
-    figure, axes = plt.subplots(1, 2, figsize=(11, 4))
-    axes[0].hist(difference.angle_deg, bins=60, color="C0")
-    axes[0].set_xlabel("angle (deg)")
-    axes[0].set_ylabel("samples")
-    axes[0].set_title("IMU vs EM angle")
-    axes[1].hist(difference.heading_deg, bins=60, alpha=0.6, color="C3", label="heading")
-    axes[1].hist(difference.tilt_deg, bins=60, alpha=0.6, color="C4", label="tilt")
-    axes[1].set_xlabel("deg")
-    axes[1].set_title("heading (signed) and tilt")
-    axes[1].legend()
-    figure.tight_layout()
-    paths.append(_save(figure, folder / "histogram.png"))
-    return paths
+def hold_label(hold: Hold) -> str:
+    """How figures and tables name a hold: "pose 3" (calibration pose 3), or "sweep 1
+    step 4"."""
+    return f"pose {hold.step}" if hold.sweep < 0 else f"sweep {hold.sweep} step {hold.step}"

@@ -34,6 +34,7 @@ from ..model_choice import ModelChoice, choose_model, model_choice
 from ..models.shooting import ShootingModel
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
+from .figure_options import add_format_argument
 from .log_notice import warn_if_incomplete
 
 LABELS = {"ref": "Ref.", "online": "Proposed"}
@@ -51,7 +52,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "predicted on the same data with its own model and effects: errors before/after")
     parser.add_argument("--online", action="store_true", help="also run online disturbance estimation")
     render.add_json_argument(parser)
-    parser.add_argument("--report", type=Path, metavar="DIR", help="write figures (PNG) to this folder")
+    parser.add_argument("--report", type=Path, metavar="DIR", help="write figures to this folder")
+    add_format_argument(parser)
     parser.epilog = ("--effect adds effects to the --params model only; it also names the file of an effect "
                      "that a parameter file lists by name (e.g. one calibrated from path/to/file.py:Class).")
     parser.set_defaults(func=run)
@@ -116,7 +118,8 @@ def run(args: argparse.Namespace) -> int:
         from ..analysis.report import write_report
 
         for path in write_report(args.report, after.results, validation, after.model.name,
-                                 baseline=None if before is None else before.results):
+                                 baseline=None if before is None else before.results,
+                                 figure_format=args.figure_format):
             console.print(f"wrote {render.plain(path)}")
     return 0
 

@@ -36,6 +36,7 @@ from ..params_io import ParameterFile, effect_specs, write_parameter_file
 from ..profile import RigProfile
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
+from .figure_options import add_format_argument
 from .log_notice import warn_if_incomplete
 from .next_steps import command, effect_words, input_words, print_next
 
@@ -50,7 +51,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--workers", type=int, default=None,
                         help="processes for the candidate fits (default: up to 2)")
     render.add_json_argument(parser, "the diagnosis")
-    parser.add_argument("--report", type=Path, metavar="DIR", help="write figures (PNG) to this folder")
+    parser.add_argument("--report", type=Path, metavar="DIR", help="write figures to this folder")
+    add_format_argument(parser)
     parser.add_argument("--depth", type=int, default=DEFAULT_DEPTH, metavar="N",
                         help=f"name up to N effects, each on top of the ones before (default {DEFAULT_DEPTH})")
     parser.add_argument("--separating-plan", type=Path, metavar="PATH",
@@ -91,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from ..analysis.diagnosis.plots import write_diagnosis_report
 
-        for path in write_diagnosis_report(args.report, diagnosis):
+        for path in write_diagnosis_report(args.report, diagnosis, args.figure_format):
             console.print(f"wrote {render.plain(path)}")
     tied = next((stage for stage in (diagnosis, *diagnosis.stages) if stage.alternatives), None)
     if tied is not None and tied.separating_poses:

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from . import render
+from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
 from .log_notice import warn_if_incomplete
 
@@ -27,6 +28,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--online", action="store_true", help="online disturbance estimation, as live")
     render.add_json_argument(parser)
     parser.add_argument("--report", type=Path, metavar="DIR", help="write figures to this folder")
+    add_format_argument(parser)
     render.add_exit_codes(parser, {1: "the replayed errors are not finite (no answer)"})
     parser.set_defaults(func=run)
 
@@ -54,7 +56,8 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from ..analysis.report import write_report
 
-        for path in write_report(args.report, result.results, result.steps, model.name):
+        for path in write_report(args.report, result.results, result.steps, model.name,
+                                 figure_format=args.figure_format):
             console.print(f"wrote {render.plain(path)}")
     if result.skipped:
         render.progress_console().print(f"[yellow]warning:[/] {result.skipped} step(s) did not converge and were "

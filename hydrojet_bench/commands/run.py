@@ -30,6 +30,7 @@ from ..model_choice import ModelDefaults, model_choice
 from ..profile import load_profile
 from . import render
 from .common import add_model_arguments, check_seed
+from .figure_options import add_format_argument
 from .next_steps import command
 
 if TYPE_CHECKING:
@@ -57,6 +58,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="session seconds per wall second on the simulated rig (default: the profile's)")
     parser.add_argument("--seed", type=int, help="digital twin noise seed (default: the profile's)")
     parser.add_argument("--report", type=Path, metavar="DIR", help="write the session's figures to this folder")
+    add_format_argument(parser)
     parser.add_argument("--no-live", action="store_true", help="no live view (plain progress lines)")
     parser.add_argument("--foxglove", nargs="?", const=str(FOXGLOVE_PORT), metavar="[HOST:]PORT",
                         help="stream the session to Foxglove or Lichtblick over their WebSocket protocol on "
@@ -230,7 +232,8 @@ def _print_outcome(console: Console, result, model_name: str, args: argparse.Nam
             if args.report:
                 from ..analysis.report import write_report
 
-                for path in write_report(args.report, results, validation_steps, model_name):
+                for path in write_report(args.report, results, validation_steps, model_name,
+                                                 figure_format=args.figure_format):
                     console.print(f"wrote {render.plain(path)}")
     log = result.log_path
     console.print("\nnext:")

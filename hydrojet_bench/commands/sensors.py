@@ -19,8 +19,8 @@ import numpy as np
 from rich.console import Console
 
 from ..analysis.sensors import (AXES, DEFAULT_MIN_HOLD_S, DEFAULT_SETTLE_S, METHODS, AngleSummary,
-                                EstimatorComparison, SensorAgreement, compare_estimators, imu_profile,
-                                sensor_agreement, write_sensor_report)
+                                EstimatorComparison, SensorAgreement, compare_estimators, hold_label,
+                                imu_profile, sensor_agreement)
 from ..data.dataset import Dataset
 from ..errors import ConvergenceError, UserError
 from ..estimation import OnlineSettings
@@ -30,6 +30,7 @@ from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log
 from ..logs.topics import Sample
 from ..model_choice import ModelDefaults, model_choice
 from . import render
+from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
 from .log_notice import warn_if_incomplete
 
@@ -50,7 +51,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--max-gap", type=float, metavar="S",
                         help="largest EM gap to interpolate across (default: 1.5 EM periods)")
     render.add_json_argument(parser)
-    parser.add_argument("--report", type=Path, metavar="DIR", help="write figures (PNG) to this folder")
+    parser.add_argument("--report", type=Path, metavar="DIR", help="write figures to this folder")
+    add_format_argument(parser)
     parser.set_defaults(func=run)
 
 
@@ -76,7 +78,9 @@ def run(args: argparse.Namespace) -> int:
             "online_estimation": None if estimation is None else {"model": model_line, **estimation.as_dict()},
             "log_damage": log_damage})
     if args.report:
-        for path in write_sensor_report(args.report, agreement):
+        from ..analysis.sensor_plots import write_sensor_report
+
+        for path in write_sensor_report(args.report, agreement, args.figure_format):
             console.print(f"wrote {render.plain(path)}")
     return 0
 
@@ -186,7 +190,7 @@ def print_agreement(console: Console, agreement: SensorAgreement, log: Path) -> 
                                  f"{_deg(agreement.across_holds_deg_per_min, signed=True)}, within holds (mean) "
                                  f"{_deg(agreement.within_holds_deg_per_min, signed=True)}")
     for hold in agreement.holds:
-        table.add_row(f"{hold.sweep}/{hold.step}", ",".join(f"{f * 1e3:.0f}" for f in hold.jet_forces_n),
+        table.add_row(hold_label(hold), ",".join(f"{f * 1e3:.0f}" for f in hold.jet_forces_n),
                       str(hold.angle.count), _deg(hold.angle.mean_deg), _deg(hold.sd_deg), _deg(hold.bias_deg),
                       _deg(hold.mean_heading_deg, signed=True), _deg(hold.mean_tilt_deg),
                       _deg(hold.trend_deg_per_min, signed=True))

@@ -24,7 +24,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.ticker import NullFormatter  # noqa: E402
 
-from ..analysis.report import _save  # noqa: E402
+from ..analysis.figures import save as _save  # noqa: E402
 from ..errors import UserError  # noqa: E402
 
 POWER_LEVEL = 0.9
