@@ -89,7 +89,7 @@ def _input_files(args: argparse.Namespace) -> str:
 
 def _print_error(message: str) -> None:
     # The message quotes the user's file names, keys and cells: escaped, "[rod]" stays "[rod]".
-    Console(stderr=True).print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
+    Console(stderr=True).print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True, emoji=False)
 
 
 if __name__ == "__main__":

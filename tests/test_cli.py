@@ -32,7 +32,7 @@ def test_help_lists_every_command_and_no_retired_one(capsys):
 
 def test_perf_writes_json_with_every_figure_and_its_target(tmp_path):
     path = tmp_path / "perf.json"
-    assert main(["perf", "--runs", "200", "--json", str(path)]) == 0
+    assert main(["perf", "--runs", "200", "--no-session", "--json", str(path)]) == 0
     figures = json.loads(path.read_text())
     for name in ("cosserat_warm_solve", "cosserat_cold_solve", "prb_warm_solve", "sensitivity_6_columns"):
         assert figures[name]["median_us"] > 0 and figures[name]["target_us"] > 0

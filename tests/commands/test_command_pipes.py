@@ -55,7 +55,7 @@ def folder(tmp_path_factory) -> Path:
 def test_tables_keep_whole_names_on_a_pipe(folder):
     data = f"{LONG_NAME}.csv"
     calibrated = whole(piped("calibrate", data, "-o", "p.toml", cwd=folder))
-    assert f"cosserat calibrated on 20 poses of {data}" in calibrated.stdout.splitlines()
+    assert f"cosserat calibrated on 20 calibration poses of {data}" in calibrated.stdout.splitlines()
     assert calibrated.stderr == ""
     compared = whole(piped("compare", data, "--params", "p.toml", "--online", cwd=folder))
     assert f"RMS errors, cosserat on {data}" in compared.stdout.splitlines()
