@@ -42,6 +42,8 @@ def _refused(port: int, within_s: float = 5.0) -> bool:
             socket.create_connection(("127.0.0.1", port), timeout=2).close()
         except ConnectionRefusedError:
             return True
+        except ConnectionResetError:
+            pass  # accepted as the listener closed: ask again
         time.sleep(0.05)
     return False
 
