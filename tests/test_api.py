@@ -73,9 +73,13 @@ def test_per_step_tables_hold_commands_poses_and_errors(mystery, tmp_path):
     overall = in_memory.table_ii().set_index(["method", "group"])
     assert overall.loc[("ref", "all"), "orientation_rmse_deg"] == in_memory.results["ref"].overall.orientation_rmse_deg
 
-    poses = calibration.to_pandas()
+    # pressure_stiffening shows only over the sweeps' range of forces: fitted on poses and sweeps.
+    fitted = calibration.to_pandas()
+    assert calibration.parameter_file.calibration["fit_on"] == "all"
+    assert (fitted["sweep"] == -1).sum() == 20 and (fitted["sweep"] >= 0).sum() == len(fitted) - 20 > 0
+    assert np.sqrt(np.mean(fitted["orientation_error_deg"] ** 2)) < 2 * calibration.fit.rms_orientation_deg_after + 0.1
+    poses = hj.calibrate(data).to_pandas()
     assert (poses["sweep"] == -1).all() and len(poses) == 20
-    assert np.sqrt(np.mean(poses["orientation_error_deg"] ** 2)) < 2 * calibration.fit.rms_orientation_deg_after + 0.1
     for figure in (data.plot(), calibration.plot(), in_memory.plot()):
         assert isinstance(figure, Figure)
         assert figure.get_suptitle() or figure.axes[0].get_title()
