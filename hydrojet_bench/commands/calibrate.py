@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     for name, value, error in zip(result.names, result.values, result.standard_errors):
         table.add_row(name, f"{value:.6g}", f"{error:.2g}")
     console.print(table)
-    console.print(f"RMS orientation error on the fitted rows: {result.rms_orientation_deg_before:.2f} deg "
+    console.print(f"RMS orientation error on the {_FITTED_ROWS[fit_on]}: {result.rms_orientation_deg_before:.2f} deg "
                   f"before, {result.rms_orientation_deg_after:.2f} deg after ({result.evaluations} evaluations)")
     for first, second, correlation in result.unidentifiable:
         console.print(f"[yellow]warning:[/] {first} and {second} are not separately identifiable on these rows "
@@ -91,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+_FITTED_ROWS = {CALIBRATION_POSES: "calibration poses", SWEEPS: "sweep steps", ALL_ROWS: "calibration poses and sweeps"}
 _ROW_NAMES = {CALIBRATION_POSES: "calibration poses (steps of sweep -1)", SWEEPS: "sweep steps (sweep >= 0)",
               ALL_ROWS: "calibration poses or sweep steps"}
 

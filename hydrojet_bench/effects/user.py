@@ -114,8 +114,8 @@ def checked_effect(effect: object, origin: str, reserved_names: Mapping[str, obj
         if moved == parameter.default:
             continue
         changed = {**defaults, parameter.name: moved}
-        if all(_same(_trial(checked, nominal, forces, changed), unchanged)
-               for forces, unchanged in zip(_TRIAL_FORCES_N, plain)):
+        if not any(_differs(checked, nominal, forces, changed, unchanged)
+                   for forces, unchanged in zip(_TRIAL_FORCES_N, plain)):
             raise UserError(f"effect {origin}: parameter {parameter.name!r} changes nothing apply sets "
                             f"(from {parameter.default:g} to {moved:g}); apply must use values[{parameter.name!r}]")
     return checked
@@ -127,6 +127,17 @@ def _trial(effect: CheckedEffect, params: ModelParameters, jet_forces_n: np.ndar
     problem = RodProblem.nominal(params, jet_forces_n, np.linspace(0.0, params.rod.length_m, _TRIAL_SAMPLES))
     effect.apply(problem, values)
     return problem
+
+
+def _differs(effect: CheckedEffect, params: ModelParameters, jet_forces_n: np.ndarray, values: Mapping[str, float],
+             unchanged: RodProblem) -> bool:
+    """Whether ``effect`` at ``values`` edits the trial problem otherwise than ``unchanged``.
+    One that fails there reads its parameter too: the failure is reported when a solve
+    meets it (a study records it as that cell's error)."""
+    try:
+        return not _same(_trial(effect, params, jet_forces_n, values), unchanged)
+    except UserError:
+        return True
 
 
 def _same(first: RodProblem, second: RodProblem) -> bool:
