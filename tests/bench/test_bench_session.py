@@ -5,6 +5,7 @@ replay of that log."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -174,3 +175,24 @@ def test_a_session_with_an_effect_logs_its_parameters(tmp_path):
     logged = read_log(log_path, topics=["/bench/parameters"]).messages[0]
     assert logged.parameters["pressure_stiffening.coefficient_1_n"] == 1.5
     assert logged.effects == ("pressure_stiffening",)
+
+
+def test_a_stream_below_its_configured_rate_is_measured_logged_and_warned(tmp_path):
+    """An IMU rate no host can keep (a read per 0.1 ms of session time, 1 us of wall time
+    at x10) must show as delivered below configured, in the result, the log and a warning."""
+    log_path = tmp_path / "slow.mcap"
+    request = make_request(log_path, plan=validation_sweeps(steps_up=1, repetitions=1, settle_s=SETTLE_S),
+                           calibrate=False)
+    settings = replace(request.settings, imu=replace(request.settings.imu, rate_hz=10_000.0))
+    result = asyncio.run(run_without_leaks(Session(dataclasses.replace(request, settings=settings))))
+    rates = {rate.stream: rate for rate in result.stream_rates}
+    assert rates["imu"].below_warning and rates["imu"].fraction < 0.5
+    assert rates["imu"].samples > 0 and rates["imu"].configured_hz == 10_000.0
+    contents = read_log(log_path)
+    logged = [m for m in contents.messages if m.topic == "/bench/stream_rate"]
+    assert {m.stream for m in logged if m.whole_session} == {"em", "imu"}
+    assert len([m for m in logged if not m.whole_session and m.stream == "imu"]) == len(request.plan)
+    warnings = [m.message for m in contents.messages
+                if m.topic == "/events" and m.level == "warning" and m.source == "imu"]
+    assert any(w.startswith("falling behind: imu stream delivered") for w in warnings), warnings
+    assert any(w.startswith("below its configured rate: imu stream") for w in warnings), warnings
