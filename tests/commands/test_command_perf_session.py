@@ -13,6 +13,7 @@ def test_session_protocol_reports_wall_time_and_rate_fractions_at_the_rigs_rates
     figures = session_protocol_figures(plan)["session_protocol"]
     rig = load_profile(RIG_PROFILE).config
     assert figures["steps"] == len(plan)
+    assert figures["aborted"] is None and figures["completed_steps"] == len(plan), figures
     assert figures["imu_rate_hz"] == rig.imu.rate_hz and figures["tracker_rate_hz"] == rig.tracker.rate_hz
     assert figures["session_s"] >= plan.duration_s
     # The wall time is at least the session time over the scale; rates are whatever this
