@@ -59,6 +59,9 @@ from .stream_rates import StreamRateFigure, StreamRateMeter
 
 # Consecutive stream failures after which a device counts as lost and the session stops.
 MAX_CONSECUTIVE_FAILURES = 20
+# Wall time a log record may arrive after the time it is stamped with (a sample written
+# after fusion, a prediction after its solve) and still be logged in time order.
+REORDER_WINDOW_WALL_S = 0.25
 
 
 def _raise_if_cancel_was_swallowed() -> None:
@@ -185,7 +188,8 @@ class Session:
         }}
         completed = 0
         with LogWriter(request.log_path, metadata=metadata, flush_interval_s=request.settings.session.flush_interval_s,
-                       overwrite=request.overwrite_log) as log:
+                       overwrite=request.overwrite_log,
+                       reorder_window_s=REORDER_WINDOW_WALL_S * self.clock.time_scale) as log:
             self._log = log
             self._write_parameters()
             for warning in request.warnings:

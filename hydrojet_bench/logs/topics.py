@@ -185,7 +185,7 @@ class StreamRate(LogRecord, kw_only=True):
 
     topic: ClassVar[str] = "/bench/stream_rate"
     stream: Annotated[Literal["em", "imu"], Meta(description="which device stream")]
-    configured_hz: Annotated[float, Meta(gt=0, description="the rate the stream is set to, Hz of session time")]
+    configured_hz: Annotated[float, Meta(ge=0, description="the rate the stream is set to, Hz of session time")]
     delivered_hz: Annotated[float, Meta(ge=0, description="samples delivered per second of session time, Hz")]
     samples: Annotated[int, Meta(ge=0, description="samples delivered in the interval")]
     interval_s: Annotated[float, Meta(ge=0, description="session time the figure covers, s")]

@@ -196,3 +196,21 @@ def test_a_stream_below_its_configured_rate_is_measured_logged_and_warned(tmp_pa
                 if m.topic == "/events" and m.level == "warning" and m.source == "imu"]
     assert any(w.startswith("falling behind: imu stream delivered") for w in warnings), warnings
     assert any(w.startswith("below its configured rate: imu stream") for w in warnings), warnings
+
+
+def test_log_is_written_in_time_order(finished_session):
+    """Every channel's log time runs forward and chunks cover disjoint time ranges, however
+    late a sample or a prediction reaches the writer."""
+    from mcap.reader import make_reader
+
+    session, _ = finished_session
+    with open(session.request.log_path, "rb") as stream:
+        reader = make_reader(stream)
+        chunks = sorted(reader.get_summary().chunk_indexes, key=lambda chunk: chunk.chunk_start_offset)
+        last_by_channel: dict[int, int] = {}
+        for _, channel, message in reader.iter_messages(log_time_order=False):
+            assert message.log_time >= last_by_channel.get(channel.id, 0), channel.topic
+            last_by_channel[channel.id] = message.log_time
+    assert len(chunks) > 1
+    for earlier, later in zip(chunks, chunks[1:]):
+        assert earlier.message_end_time <= later.message_start_time
