@@ -47,7 +47,7 @@ def test_user_mistakes_are_one_line_without_traceback(tmp_path):
         (["perf", "--runs", "10"], "--runs must be at least 200"),
         (["calibrate", str(tmp_path / "missing.csv"), "--position-weight", "-1", "-o", str(tmp_path / "p.toml")],
          "--position-weight must be >= 0"),
-        (["perf", "--runs", "200", "--json", str(tmp_path / "missing" / "out.json")], "cannot write"),
+        (["perf", "--runs", "200", "--no-session", "--json", str(tmp_path / "missing" / "out.json")], "cannot write"),
     ):
         result = run_cli(*args)
         assert result.returncode == 2, args

@@ -43,7 +43,7 @@ from ..estimation.calibration import CalibrationResult, calibrate_dataset
 from ..estimation.path import PathPredictor, StepPrediction
 from ..logs import LogWriter, floats
 from ..logs.topics import (Disturbance, EmFrame, EmTool, Event, ImuOrientation, ImuRaw, ModelPrediction,
-                           Parameters, Sample, Step, ValveCommand, ValveReply)
+                           Parameters, Sample, Step, StreamRate, ValveCommand, ValveReply)
 from ..models.shooting import ShootingModel
 from ..effects import effect_values
 from ..geometry import quat_from_matrix
@@ -55,9 +55,13 @@ from .clock import Clock, ScaledClock
 from .recorder import StepRecorder
 from .rig import ImuPair, open_rig
 from .simulated_rig import SimulatedDevices
+from .stream_rates import StreamRateFigure, StreamRateMeter
 
 # Consecutive stream failures after which a device counts as lost and the session stops.
 MAX_CONSECUTIVE_FAILURES = 20
+# Wall time a log record may arrive after the time it is stamped with (a sample written
+# after fusion, a prediction after its solve) and still be logged in time order.
+REORDER_WINDOW_WALL_S = 0.25
 
 
 def _raise_if_cancel_was_swallowed() -> None:
@@ -125,6 +129,7 @@ class SessionStatus:
     imu_errors: int = 0
     valve_commands: int = 0
     valve_retries: int = 0
+    stream_rates: dict[str, StreamRateFigure] = field(default_factory=dict)  # over the last step, by stream
     events: deque = field(default_factory=lambda: deque(maxlen=6))
 
 
@@ -139,6 +144,7 @@ class SessionResult:
     calibration: CalibrationResult | None
     estimates: tuple[StepPrediction, ...]
     steps: Dataset | None
+    stream_rates: tuple[StreamRateFigure, ...] = ()  # over the whole session, one per stream that ran
 
 
 class Session:
@@ -162,6 +168,10 @@ class Session:
         self._log: LogWriter | None = None
         self._devices: SimulatedDevices | None = None
         self._stopping = False
+        self._rates = {"em": StreamRateMeter("em", request.settings.tracker.rate_hz),
+                       "imu": StreamRateMeter("imu", request.settings.imu.rate_hz)}
+        self._rate_warned: set[str] = set()
+        self._overall_rates: tuple[StreamRateFigure, ...] = ()
 
     # --- public ---------------------------------------------------------------------
 
@@ -180,7 +190,8 @@ class Session:
         }}
         completed = 0
         with LogWriter(request.log_path, metadata=metadata, flush_interval_s=request.settings.session.flush_interval_s,
-                       overwrite=request.overwrite_log, listener=self.on_log_message) as log:
+                       overwrite=request.overwrite_log, listener=self.on_log_message,
+                       reorder_window_s=REORDER_WINDOW_WALL_S * self.clock.time_scale) as log:
             self._log = log
             self._write_parameters()
             for warning in request.warnings:
@@ -202,7 +213,7 @@ class Session:
         steps = Dataset.concatenate(self.settled_rows) if self.settled_rows else None
         return SessionResult(request.log_path, completed, len(request.plan), self.clock.now(),
                              time.monotonic() - started, self.params, self.calibration,
-                             tuple(self.estimates), steps)
+                             tuple(self.estimates), steps, self._overall_rates)
 
     def event(self, level: str, source: str, message: str) -> None:
         t_s = self.clock.now()
@@ -223,7 +234,9 @@ class Session:
                 if rig.imus is not None:
                     streams.append(group.create_task(self._imu_stream(rig.imus), name="imu-stream"))
                 try:
-                    return await self._play(rig.valves)
+                    completed = await self._play(rig.valves)
+                    self._log_overall_rates()
+                    return completed
                 finally:
                     # Python 3.11's wait_for can swallow a cancellation that arrives as its
                     # inner future completes (the IMU reads complete all the time), so the
@@ -249,11 +262,12 @@ class Session:
 
     # --- streams --------------------------------------------------------------------
 
-    async def _periodic(self, rate_hz: float):
+    async def _periodic(self, meter: StreamRateMeter):
         """Yield once per period of session time; a stream that falls behind skips the
-        missed ticks rather than bursting to catch up."""
-        period = 1.0 / rate_hz
+        missed ticks rather than bursting to catch up (``meter`` then shows it)."""
+        period = 1.0 / meter.configured_hz
         next_tick = self.clock.now()
+        meter.start(next_tick)
         while not self._stopping:
             next_tick += period
             now = self.clock.now()
@@ -267,7 +281,8 @@ class Session:
         status = self.status
         failures = 0
         missing_before = False
-        async for _ in self._periodic(self.request.settings.tracker.rate_hz):
+        meter = self._rates["em"]
+        async for _ in self._periodic(meter):
             try:
                 frame = await tracker.read_frame()
                 failures = 0
@@ -278,6 +293,7 @@ class Session:
                     raise SessionAborted(f"EM tracker lost: {failures} frames failed in a row ({error})") from error
                 continue
             t_s = self.clock.now()
+            meter.delivered()
             status.em_frames += 1
             tools = tuple(EmTool(
                 name=pose.name, handle=pose.handle, status=pose.status.value, orientation=pose.orientation,
@@ -309,7 +325,8 @@ class Session:
         base_chip, tip_chip, fusion = imus.base, imus.tip, imus.fusion
         log = self._log
         failures = 0
-        async for _ in self._periodic(self.request.settings.imu.rate_hz):
+        meter = self._rates["imu"]
+        async for _ in self._periodic(meter):
             try:
                 base = await base_chip.read_sample()
                 tip = await tip_chip.read_sample()
@@ -321,6 +338,7 @@ class Session:
                 if failures >= MAX_CONSECUTIVE_FAILURES:
                     raise SessionAborted(f"IMUs lost: {failures} samples failed in a row ({error})") from error
                 continue
+            meter.delivered()
             self.status.imu_samples += 1
             for name, chip, sample in (("base", base_chip, base), ("tip", tip_chip, tip)):
                 log.write(ImuRaw(t_s=sample.t_s, sensor=name, address=chip.address,
@@ -343,6 +361,37 @@ class Session:
             step=step.step if step is not None else 0,
             base_orientation=floats(base_q), tip_orientation=floats(tip_q),
             base_position_m=floats(base_p), tip_position_m=floats(tip_p)))
+
+    # --- stream rates ---------------------------------------------------------------
+
+    def _write_rate(self, t_s: float, figure: StreamRateFigure, whole_session: bool) -> None:
+        self._log.write(StreamRate(t_s=t_s, stream=figure.stream, configured_hz=figure.configured_hz,
+                                   delivered_hz=figure.delivered_hz, samples=figure.samples,
+                                   interval_s=figure.interval_s, whole_session=whole_session))
+
+    def _log_step_rates(self) -> None:
+        """Each stream's rate over the step just played: logged, shown, and the first
+        step a stream falls behind in is a warning (once, not at every step)."""
+        t_s = self.clock.now()
+        for name, meter in self._rates.items():
+            if not meter.started:
+                continue
+            figure = meter.since_mark(t_s)
+            meter.mark(t_s)
+            self.status.stream_rates[name] = figure
+            self._write_rate(t_s, figure, whole_session=False)
+            if figure.below_warning and name not in self._rate_warned:
+                self._rate_warned.add(name)
+                self.event("warning", name, f"falling behind: {figure.describe()}")
+
+    def _log_overall_rates(self) -> None:
+        t_s = self.clock.now()
+        figures = tuple(meter.overall(t_s) for meter in self._rates.values() if meter.started)
+        for figure in figures:
+            self._write_rate(t_s, figure, whole_session=True)
+            if figure.below_warning:
+                self.event("warning", figure.stream, f"below its configured rate: {figure.describe()}")
+        self._overall_rates = figures
 
     # --- the plan -------------------------------------------------------------------
 
@@ -367,6 +416,7 @@ class Session:
             status.remaining_session_s = remaining
             status.session_time_s = self.clock.now()
             await self._settle(index, step, self.clock.now(), min(timing.window_s, step.settle_s))
+            self._log_step_rates()
             self.on_update(status)
         await self._finish_calibration()
         _raise_if_cancel_was_swallowed()

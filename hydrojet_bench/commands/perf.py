@@ -43,6 +43,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("perf", help="benchmark the model kernels (JSON)")
     render.add_json_argument(parser, "the printed figures")
     parser.add_argument("--runs", type=int, default=500, help="timed runs per figure (default 500, min 200)")
+    parser.add_argument("--no-session", action="store_true",
+                        help="skip session_protocol (the paper protocol on the simulated rig, ~1 min)")
     parser.set_defaults(func=run)
 
 
@@ -304,6 +306,10 @@ def run(args: argparse.Namespace) -> int:
     if args.runs < 200:
         raise UserError(f"--runs must be at least 200 (got {args.runs}): medians of fewer are noise")
     results = benchmark(args.runs)
+    if not args.no_session:
+        from .perf_session import session_protocol_figures
+
+        results.update(session_protocol_figures())
     render.write_json(Path(render.STDOUT), results)
     if args.json and str(args.json) != render.STDOUT:
         render.write_json(args.json, results)

@@ -179,6 +179,19 @@ class Event(LogRecord, kw_only=True):
     message: Annotated[str, Meta(description="what happened")]
 
 
+class StreamRate(LogRecord, kw_only=True):
+    """The rate a device stream delivered over ``interval_s`` of session time up to
+    ``t_s`` (one plan step, or the whole session when ``whole_session``)."""
+
+    topic: ClassVar[str] = "/bench/stream_rate"
+    stream: Annotated[Literal["em", "imu"], Meta(description="which device stream")]
+    configured_hz: Annotated[float, Meta(ge=0, description="the rate the stream is set to, Hz of session time")]
+    delivered_hz: Annotated[float, Meta(ge=0, description="samples delivered per second of session time, Hz")]
+    samples: Annotated[int, Meta(ge=0, description="samples delivered in the interval")]
+    interval_s: Annotated[float, Meta(ge=0, description="session time the figure covers, s")]
+    whole_session: Annotated[bool, Meta(description="true for the session's closing figure")]
+
+
 TOPICS: dict[str, type[LogRecord]] = {record.topic: record for record in (
     Sample, ImuRaw, ImuOrientation, EmFrame, ValveCommand, ValveReply, Step, ModelPrediction, Disturbance,
-    Parameters, Event, FrameTransform, SceneUpdate)}
+    Parameters, Event, StreamRate, FrameTransform, SceneUpdate)}

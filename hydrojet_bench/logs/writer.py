@@ -13,6 +13,8 @@ with its first message) and the messages. `close` adds the summary and footer.
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -57,7 +59,13 @@ class LogWriter:
     overwrite: replace an existing file (the user's ``--overwrite``, or a file this
         process reserved with `hydrojet_bench.files.create_numbered`).
     listener: called with (topic, log time in ns since the Unix epoch, JSON bytes) for
-        every message written, e.g. to stream the session live.
+        every message written (in the order written), e.g. to stream the session live.
+    reorder_window_s: session time a record is held back, s, so that records written
+        late (a sample stamped when it was measured, a prediction stamped with its step's
+        end) still go into the file in time order: every channel's log time then never
+        runs backwards and chunks do not overlap. A record later than the window is
+        logged at the newest time already written (its ``t_s`` keeps the true time).
+        0: written as it comes. Held records are written on `close`; a kill loses them.
 
     `write` raises ValueError for a record that is not of a topic's type or that its
     topic's reader would refuse (e.g. NaN where null is not allowed), naming the field.
@@ -65,7 +73,8 @@ class LogWriter:
 
     def __init__(self, path: str | Path, metadata: Mapping[str, Mapping[str, str]] | None = None,
                  start_time_unix_s: float | None = None, flush_interval_s: float = 1.0, *,
-                 overwrite: bool = False, listener: Callable[[str, int, bytes], None] | None = None) -> None:
+                 overwrite: bool = False, listener: Callable[[str, int, bytes], None] | None = None,
+                 reorder_window_s: float = 0.0) -> None:
         if not flush_interval_s > 0:
             raise ValueError(f"flush_interval_s must be > 0 s, got {flush_interval_s!r}")
         records = _checked_metadata(metadata or {})
@@ -76,6 +85,14 @@ class LogWriter:
         whole_s = int(start_s)  # split: start_s * 1e9 alone would round to 256 ns
         self.start_time_ns = whole_s * _NS_PER_S + round((start_s - whole_s) * _NS_PER_S)
         self.flush_interval_s = float(flush_interval_s)
+        if not reorder_window_s >= 0:
+            raise ValueError(f"reorder_window_s must be >= 0 s, got {reorder_window_s!r}")
+        self._reorder_window_ns = round(reorder_window_s * _NS_PER_S)
+        self._held: list[tuple[int, int, str, bytes]] = []  # a heap: (log_time, arrival, topic, data)
+        self._arrivals = itertools.count()
+        self._newest_ns = 0
+        self._written_ns = 0  # the newest log time in the file
+        self.late_records = 0  # records later than the reorder window
         self._stream = create_new(self.path, "session log", overwrite=overwrite)
         # Chunks are closed by time (flush_interval_s); the size limit only caps memory.
         self._writer = Writer(self._stream, chunk_size=4 * 1024 * 1024, compression=CompressionType.ZSTD)
@@ -142,7 +159,10 @@ class LogWriter:
         """Finish the file (summary, footer) and close it; closing twice is harmless."""
         if self._closed:
             return
-        self._closed = True
+        try:
+            self._release(None)
+        finally:
+            self._closed = True
         try:
             self._writer.finish()
         finally:
@@ -175,6 +195,25 @@ class LogWriter:
 
     def _add(self, topic: str, log_time: int, data: bytes) -> None:
         self._check_open()
+        heapq.heappush(self._held, (log_time, next(self._arrivals), topic, data))
+        self._newest_ns = max(self._newest_ns, log_time)
+        self._release(self._newest_ns - self._reorder_window_ns)
+        if time.monotonic() - self._last_flush >= self.flush_interval_s:
+            self.flush()
+
+    def _release(self, up_to_ns: int | None) -> None:
+        """Write the held records stamped up to ``up_to_ns`` (None: all), oldest first."""
+        held = self._held
+        while held and (up_to_ns is None or held[0][0] <= up_to_ns):
+            log_time, _, topic, data = heapq.heappop(held)
+            written_ns = log_time
+            if self._reorder_window_ns and log_time < self._written_ns:
+                self.late_records += 1
+                written_ns = self._written_ns
+            self._written_ns = max(self._written_ns, written_ns)
+            self._write_message(topic, written_ns, log_time, data)
+
+    def _write_message(self, topic: str, log_time: int, publish_time: int, data: bytes) -> None:
         channel = self._channels.get(topic)
         if channel is None:
             record_type = TOPICS[topic]
@@ -184,11 +223,9 @@ class LogWriter:
             self._sequence[channel] = 0
         sequence = self._sequence[channel]
         self._sequence[channel] = (sequence + 1) & 0xFFFFFFFF
-        self._writer.add_message(channel, log_time=log_time, data=data, publish_time=log_time, sequence=sequence)
+        self._writer.add_message(channel, log_time=log_time, data=data, publish_time=publish_time, sequence=sequence)
         if self._listener is not None:
             self._listener(topic, log_time, data)
-        if time.monotonic() - self._last_flush >= self.flush_interval_s:
-            self.flush()
 
 
 def _checked_metadata(metadata: Mapping[str, Mapping[str, str]]) -> dict[str, dict[str, str]]:

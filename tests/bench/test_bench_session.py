@@ -5,6 +5,7 @@ replay of that log."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -174,3 +175,42 @@ def test_a_session_with_an_effect_logs_its_parameters(tmp_path):
     logged = read_log(log_path, topics=["/bench/parameters"]).messages[0]
     assert logged.parameters["pressure_stiffening.coefficient_1_n"] == 1.5
     assert logged.effects == ("pressure_stiffening",)
+
+
+def test_a_stream_below_its_configured_rate_is_measured_logged_and_warned(tmp_path):
+    """An IMU rate no host can keep (a read per 0.1 ms of session time, 1 us of wall time
+    at x10) must show as delivered below configured, in the result, the log and a warning."""
+    log_path = tmp_path / "slow.mcap"
+    request = make_request(log_path, plan=validation_sweeps(steps_up=1, repetitions=1, settle_s=SETTLE_S),
+                           calibrate=False)
+    settings = replace(request.settings, imu=replace(request.settings.imu, rate_hz=10_000.0))
+    result = asyncio.run(run_without_leaks(Session(dataclasses.replace(request, settings=settings))))
+    rates = {rate.stream: rate for rate in result.stream_rates}
+    assert rates["imu"].below_warning and rates["imu"].fraction < 0.5
+    assert rates["imu"].samples > 0 and rates["imu"].configured_hz == 10_000.0
+    contents = read_log(log_path)
+    logged = [m for m in contents.messages if m.topic == "/bench/stream_rate"]
+    assert {m.stream for m in logged if m.whole_session} == {"em", "imu"}
+    assert len([m for m in logged if not m.whole_session and m.stream == "imu"]) == len(request.plan)
+    warnings = [m.message for m in contents.messages
+                if m.topic == "/events" and m.level == "warning" and m.source == "imu"]
+    assert any(w.startswith("falling behind: imu stream delivered") for w in warnings), warnings
+    assert any(w.startswith("below its configured rate: imu stream") for w in warnings), warnings
+
+
+def test_log_is_written_in_time_order(finished_session):
+    """Every channel's log time runs forward and chunks cover disjoint time ranges, however
+    late a sample or a prediction reaches the writer."""
+    from mcap.reader import make_reader
+
+    session, _ = finished_session
+    with open(session.request.log_path, "rb") as stream:
+        reader = make_reader(stream)
+        chunks = sorted(reader.get_summary().chunk_indexes, key=lambda chunk: chunk.chunk_start_offset)
+        last_by_channel: dict[int, int] = {}
+        for _, channel, message in reader.iter_messages(log_time_order=False):
+            assert message.log_time >= last_by_channel.get(channel.id, 0), channel.topic
+            last_by_channel[channel.id] = message.log_time
+    assert len(chunks) > 1
+    for earlier, later in zip(chunks, chunks[1:]):
+        assert earlier.message_end_time <= later.message_start_time

@@ -13,6 +13,7 @@ import pytest
 from rich.console import Console
 
 from hydrojet_bench.bench.live_view import LiveView
+from hydrojet_bench.bench.stream_rates import StreamRateFigure
 from hydrojet_bench.bench.session import SessionStatus
 from hydrojet_bench.logs import read_log
 from hydrojet_bench.logs.topics import Event, ValveCommand
@@ -75,6 +76,8 @@ def test_live_view_renders_progress_errors_and_health():
     status = SessionStatus(step_count=229, phase="sweep 3", step_index=99, step=PlanStep((0.05, 0.0, 0.0), 3, 7),
                            remaining_session_s=600.0, ref_error_deg=1.234, online_error_deg=0.456,
                            disturbance_norm_nm=2.5e-4, em_frames=4000, em_missing=3, imu_samples=1000)
+    status.stream_rates["em"] = StreamRateFigure("em", configured_hz=40.0, samples=199, interval_s=5.0)
+    status.stream_rates["imu"] = StreamRateFigure("imu", configured_hz=100.0, samples=400, interval_s=5.0)
     status.events.append((12.0, "warning", "sensor not tracked: tip MISSING"))
     status.events.append((13.0, "error", "stopped: effect [bold]my[/x].py:Twist: apply failed"))
     console = Console(record=True, width=100)
@@ -82,5 +85,5 @@ def test_live_view_renders_progress_errors_and_health():
     text = console.export_text()
     for expected in ("step 100/229", "sweep 3", "q1 0.050", "ref 1.23", "online 0.46", "0.25 mN m",
                      "4000 frames, 3 incomplete", "sensor not tracked", "ETA 00:24",
-                     "effect [bold]my[/x].py:Twist"):
+                     "effect [bold]my[/x].py:Twist", "em 39.8/40 Hz", "imu 80.0/100 Hz"):
         assert expected in text, (expected, text)

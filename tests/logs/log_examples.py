@@ -11,7 +11,7 @@ from mcap.reader import make_reader
 
 from hydrojet_bench.logs import TOPICS, LogRecord, LogWriter, floats
 from hydrojet_bench.logs.topics import (Disturbance, EmFrame, EmTool, Event, ImuOrientation, ImuRaw, ModelPrediction,
-                                        Parameters, Sample, Step, ValveCommand, ValveReply)
+                                        Parameters, Sample, Step, StreamRate, ValveCommand, ValveReply)
 
 START_TIME_UNIX_S = 1_700_000_000.25
 METADATA = {"bench": {"profile_name": "sim", "software_version": "test"}, "operator": {"name": "A. N. Other"}}
@@ -43,21 +43,34 @@ EXAMPLES: dict[str, LogRecord] = {record.topic: record for record in (
     Parameters(t_s=0.0, model="cosserat", effects=("gravity",), parameters={"E0": 3e5, "EL": 2e5}, calibrated=True,
                rms_orientation_deg_before=9.0, rms_orientation_deg_after=None),
     Event(t_s=0.0, level="warning", source="tracker", message="sensor not tracked: tip MISSING"),
+    StreamRate(t_s=0.0, stream="imu", configured_hz=100.0, delivered_hz=97.5, samples=195, interval_s=2.0,
+               whole_session=False),
 )}
 # The two Foxglove topics are written by their own methods.
 FOXGLOVE_TOPICS = ("/tf", "/scene/backbone")
+# Topics added since tests/logs/data/format1_all_topics.mcap was written.
+ADDED_AFTER_FORMAT_1 = ("/bench/stream_rate",)
+# The topics in the order `write_all_topics` writes them.
+WRITE_ORDER = ([topic for topic in EXAMPLES if topic not in ADDED_AFTER_FORMAT_1] + list(FOXGLOVE_TOPICS)
+               + list(ADDED_AFTER_FORMAT_1))
 assert set(EXAMPLES) | set(FOXGLOVE_TOPICS) == set(TOPICS)
 
 
 def write_all_topics(log: LogWriter, t_s: float) -> float:
     """Every topic once, at t_s, t_s + 0.01, ...; returns the next free time."""
     for record in EXAMPLES.values():
-        log.write(msgspec.structs.replace(record, t_s=t_s))
-        t_s += 0.01
+        if record.topic not in ADDED_AFTER_FORMAT_1:
+            log.write(msgspec.structs.replace(record, t_s=t_s))
+            t_s += 0.01
     log.write_transform(t_s, parent="base", child="tip", rotation=QUATERNION, translation_m=[0.01, 0.0, 0.068])
     t_s += 0.01
     log.write_backbone(t_s, positions_in_base_m=np.linspace([0, 0, 0], [0.01, 0.0, 0.068], 5))
-    return t_s + 0.01
+    t_s += 0.01
+    # Last, so a log of these examples starts as the format-1 log of the same examples did.
+    for topic in ADDED_AFTER_FORMAT_1:
+        log.write(msgspec.structs.replace(EXAMPLES[topic], t_s=t_s))
+        t_s += 0.01
+    return t_s
 
 
 def small_log(path: Path, chunks: int = 3) -> Path:

@@ -1,0 +1,23 @@
+"""`perf`'s session_protocol section: a plan played on the simulated rig at the physical
+rig's rates, reported as wall time and delivered / configured rate per stream."""
+
+from __future__ import annotations
+
+from hydrojet_bench.commands.perf_session import RIG_PROFILE, session_protocol_figures
+from hydrojet_bench.plans import validation_sweeps
+from hydrojet_bench.profile import load_profile
+
+
+def test_session_protocol_reports_wall_time_and_rate_fractions_at_the_rigs_rates():
+    plan = validation_sweeps(steps_up=1, repetitions=1, settle_s=5.0)
+    figures = session_protocol_figures(plan)["session_protocol"]
+    rig = load_profile(RIG_PROFILE).config
+    assert figures["steps"] == len(plan)
+    assert figures["aborted"] is None and figures["completed_steps"] == len(plan), figures
+    assert figures["imu_rate_hz"] == rig.imu.rate_hz and figures["tracker_rate_hz"] == rig.tracker.rate_hz
+    assert figures["session_s"] >= plan.duration_s
+    # The wall time is at least the session time over the scale; rates are whatever this
+    # host delivers, but some of each stream always arrives and never more than asked.
+    assert figures["wall_s"] >= plan.duration_s / figures["time_scale"]
+    for stream in ("imu", "tracker"):
+        assert 0 < figures[f"{stream}_rate_fraction"] <= 1.05, figures
