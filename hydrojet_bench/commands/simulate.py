@@ -18,7 +18,7 @@ from ..effects import load_effect
 from ..files import check_writable_target, make_folder_for, publish
 from ..plans import paper_protocol
 from ..profile import load_profile
-from ..twin import DigitalTwin, TwinConfig
+from ..twin import SETUP_ERRORS, DigitalTwin, SetupErrors, TwinConfig, parse_setup_error
 from .common import check_seed
 
 
@@ -29,7 +29,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--profile", default="sim", help="rig profile (default: sim)")
     parser.add_argument("--hidden", action="append", default=[], metavar="EFFECT",
                         help="physics the twin has and the models may not: a library name or "
-                             "path/to/file.py:Class (repeatable; replaces the profile's [twin] hidden_effects)")
+                             "path/to/file.py:Class (repeatable; replaces the profile's [twin] hidden_effects), "
+                             "or a setup error NAME=VALUES: " + ", ".join(f"{name}=..." for name in SETUP_ERRORS))
     parser.add_argument("--seed", type=int, default=None, help="noise seed (default: the profile's, else 0)")
     parser.set_defaults(func=run)
 
@@ -40,8 +41,17 @@ def run(args: argparse.Namespace) -> int:
     check_writable_target(args.output, "recording", overwrite=args.overwrite)  # before minutes of simulation
     profile = load_profile(args.profile)
     changes: dict[str, object] = {}
-    if args.hidden:
-        changes["hidden_effects"] = tuple(load_effect(spec) for spec in args.hidden)
+    setup = SetupErrors()
+    effects = []
+    for spec in args.hidden:
+        if spec.partition("=")[0] in SETUP_ERRORS:
+            setup = parse_setup_error(spec, setup)
+        else:
+            effects.append(load_effect(spec))
+    if effects:
+        changes["hidden_effects"] = tuple(effects)
+    if setup.any:
+        changes["setup"] = setup
     if args.seed is not None:
         changes["seed"] = args.seed
     config = TwinConfig.from_profile(profile, **changes)
@@ -50,7 +60,8 @@ def run(args: argparse.Namespace) -> int:
     recording = twin.run_plan(paper_protocol())
     dataset = recording.to_dataset(profile, f"twin seed {config.seed}")
     rows = publish(args.output, "recording", lambda partial: write_csv(dataset, partial), overwrite=args.overwrite)
-    hidden_names = ", ".join(effect.name for effect in hidden) or "none"
+    hidden_names = ", ".join([effect.name for effect in hidden]
+                             + [spec for spec in args.hidden if spec.partition("=")[0] in SETUP_ERRORS]) or "none"
     Console().print(f"wrote {rows} samples (229 steps: 40 calibration poses, 9 sweeps) to {args.output}; "
                     f"hidden effects: {hidden_names}", markup=False)
     return 0

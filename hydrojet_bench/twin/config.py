@@ -30,6 +30,7 @@ from ..errors import UserError
 from ..geometry import quat_normalize
 from ..params import JET_COUNT, ModelParameters, with_parameters
 from ..profile import RigProfile, SensorMounting
+from .setup_errors import SetupErrors
 
 _TWIN_DEFAULTS = TwinTable()
 # The default rig hangs the rod from its clamp with the tracker's z axis up: the base
@@ -154,6 +155,7 @@ class TwinConfig:
     max_force_n: full-scale jet force of the default linear valve response, N.
     jet_response: one `JetResponse` per jet, or None for linear 0..1000 -> 0..max_force_n.
     resolution: integration steps of the twin's Cosserat rod.
+    setup: `SetupErrors`, a rig wired or described wrongly (default: none).
     """
 
     true_params: ModelParameters = field(default_factory=ModelParameters)
@@ -171,6 +173,7 @@ class TwinConfig:
     max_force_n: float = DEFAULT_MAX_JET_FORCE_N
     jet_response: tuple[JetResponse, JetResponse, JetResponse] | None = None
     resolution: int = 20
+    setup: SetupErrors = field(default_factory=SetupErrors)
 
     def __post_init__(self) -> None:
         owner = "TwinConfig"
@@ -233,6 +236,8 @@ class TwinConfig:
         if isinstance(self.resolution, bool) or not isinstance(self.resolution, (int, np.integer)) \
                 or self.resolution < 1:
             raise ValueError(f"{owner}.resolution must be an integer >= 1, got {self.resolution!r}")
+        if not isinstance(self.setup, SetupErrors):
+            raise ValueError(f"{owner}.setup must be SetupErrors, got {type(self.setup).__name__}")
 
     @classmethod
     def from_profile(cls, profile: RigProfile, **changes: object) -> "TwinConfig":
