@@ -17,13 +17,16 @@ tracker's base pose is gravity as the model will have it. A difference above
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..data.dataset import Dataset
 from ..geometry import matrix_from_quat, so3_log
 from ..models.shooting import ShootingModel
 from ..params import JET_COUNT, ModelParameters
+from ..profile import RigProfile
 
 WIRING, LEVEL = "wiring", "level"
 
@@ -50,7 +53,7 @@ class CheckResult:
     message: one line for the user. values: the figures behind it (logged)."""
 
     check: str
-    status: str
+    status: str  # "pass", "fail", "warn" or "unavailable" (the sensors it needs are missing)
     message: str
     values: dict[str, float]
 
@@ -136,3 +139,43 @@ def check_level(accel_in_clamp_m_s2: np.ndarray, gravity_in_clamp_m_s2: np.ndarr
                            f"{settings.level_limit_deg:g}): is the field generator level and [gravity] right? "
                            + vectors, values)
     return CheckResult(LEVEL, "pass", f"level check passed ({angle_deg:.2f} deg): " + vectors, values)
+
+
+async def run_setup_checks(hold: Callable[[tuple[float, float, float]], Awaitable[Dataset | None]],
+                           rest_accel_m_s2: Callable[[], np.ndarray | None], model: ShootingModel,
+                           params: ModelParameters, profile: RigProfile,
+                           settings: CheckSettings = CheckSettings()) -> list[CheckResult]:
+    """Run the level and wiring checks on a rig.
+
+    hold(forces): command these jet forces (N), hold them ``settings.settle_s`` and return
+    the settled EM row (a one-row `Dataset`), None when the tracker gave nothing.
+    rest_accel_m_s2(): the base IMU's mean accelerometer reading (sensor frame, m/s^2)
+    over the settled end of the last hold, None without IMUs.
+    params: the parameters the model predicts with (gravity replaced by the measured
+    base pose's)."""
+    rest = await hold((0.0, 0.0, 0.0))
+    if rest is None:
+        return [CheckResult(WIRING, "unavailable", "setup checks skipped: the tracker gave no pose at rest", {})]
+    gravity_in_clamp = profile.gravity_in_base_m_s2(rest.base_orientation[0])
+    results = []
+    accel = rest_accel_m_s2()
+    if accel is None:
+        results.append(CheckResult(LEVEL, "unavailable", "level check needs a base IMU; this rig has none", {}))
+    else:
+        mounting = matrix_from_quat(profile.base_sensor.rotation_in_body)
+        results.append(check_level(mounting @ accel, gravity_in_clamp, settings))
+    fired = []
+    for jet in range(JET_COUNT):
+        forces = tuple(settings.force_n if k == jet else 0.0 for k in range(JET_COUNT))
+        row = await hold(forces)  # type: ignore[arg-type]
+        if row is None:
+            results.append(CheckResult(WIRING, "unavailable", f"wiring check: no tracker pose with jet {jet + 1} "
+                                       "fired", {}))
+            return results
+        fired.append(row.tip_orientation_in_base()[0])
+    await hold((0.0, 0.0, 0.0))
+    predicted = predicted_bending_rad(model, replace(params, gravity_in_base_m_s2=tuple(gravity_in_clamp)),
+                                      settings.force_n)
+    measured = measured_bending_rad(rest.tip_orientation_in_base()[0], np.array(fired))
+    results.append(check_wiring(measured, predicted, settings))
+    return results

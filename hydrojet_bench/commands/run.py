@@ -52,6 +52,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, help="digital twin noise seed (default: the profile's)")
     parser.add_argument("--report", type=Path, metavar="DIR", help="write the session's figures to this folder")
     parser.add_argument("--no-live", action="store_true", help="no live view (plain progress lines)")
+    parser.add_argument("--skip-checks", action="store_true",
+                        help="skip the wiring and level checks before the plan (the log records the skip)")
     parser.set_defaults(func=run)
 
 
@@ -92,7 +94,8 @@ def run(args: argparse.Namespace) -> int:
                              effects=choice.effect_specs, params=choice.parameters(profile.model_parameters()),
                              calibrate=not args.no_calibration, calibration_names=choice.calibration_names,
                              seed=args.seed, warnings=(clipped_warning,) if clipped_warning else (),
-                             command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]), overwrite_log=overwrite)
+                             command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]), overwrite_log=overwrite,
+                             setup_checks=not args.skip_checks)
     console = render.console_for(args)
     rig = "simulated rig" if settings.transports.simulated else "rig"
     console.print(f"session on [bold]{render.plain(profile.name)}[/] ({rig}): "

@@ -258,6 +258,11 @@ class TwinConfig:
             hidden_effects = tuple(load_effect(_effect_spec(spec, profile)) for spec in table.hidden_effects)
         except UserError as error:
             raise UserError(f"{profile.source}: twin.hidden_effects: {error}") from None
+        try:
+            setup = SetupErrors(table.jet_wiring, table.tracker_tilt_deg, table.base_sensor_rotvec_rad)
+        except ValueError:
+            raise UserError(f"{profile.source}: twin.jet_wiring must be a permutation of 1, 2, 3, "
+                            f"got {list(table.jet_wiring)}") from None
         values: dict[str, object] = {
             "true_params": true_params,
             "gravity_in_tracker_m_s2": profile.gravity_in_tracker_m_s2,
@@ -272,6 +277,7 @@ class TwinConfig:
             "noise": table.noise,
             "seed": table.seed,
             "settle_time_constant_s": table.settle_time_constant_s,
+            "setup": setup,
         }
         values.update(changes)
         try:
