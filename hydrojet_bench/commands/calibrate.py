@@ -11,7 +11,8 @@ import argparse
 from pathlib import Path
 
 from ..errors import UserError
-from ..estimation.calibration import DEFAULT_POSITION_WEIGHT_RAD_PER_M, calibrate_dataset
+from ..estimation.calibration import DEFAULT_POSITION_WEIGHT_RAD_PER_M, calibrate_dataset, parameter_bounds
+from ..estimation.setup_warnings import setup_warnings
 from ..model_choice import COSSERAT, model_choice
 from ..params_io import ParameterFile, write_parameter_file
 from . import render
@@ -54,6 +55,8 @@ def run(args: argparse.Namespace) -> int:
     console.print(table)
     console.print(f"RMS orientation error on the calibration poses: {result.rms_orientation_deg_before:.2f} deg "
                   f"before, {result.rms_orientation_deg_after:.2f} deg after ({result.evaluations} evaluations)")
+    for warning in setup_warnings(result.names, tuple(result.values), lambda name: parameter_bounds(model, name)):
+        console.print(f"[yellow]warning:[/] {render.plain(warning)}")
     for first, second, correlation in result.unidentifiable:
         console.print(f"[yellow]warning:[/] {first} and {second} are not separately identifiable on these poses "
                       f"(correlation {correlation:+.3f}); their individual values mean little")

@@ -11,7 +11,8 @@ from mcap.reader import make_reader
 
 from hydrojet_bench.logs import TOPICS, LogRecord, LogWriter, floats
 from hydrojet_bench.logs.topics import (Disturbance, EmFrame, EmTool, Event, ImuOrientation, ImuRaw, ModelPrediction,
-                                        Parameters, Sample, Step, ValveCommand, ValveReply)
+                                        Parameters, Sample, SetupCheck, Step, ValveCommand,
+                                        ValveReply)
 
 START_TIME_UNIX_S = 1_700_000_000.25
 METADATA = {"bench": {"profile_name": "sim", "software_version": "test"}, "operator": {"name": "A. N. Other"}}
@@ -43,6 +44,8 @@ EXAMPLES: dict[str, LogRecord] = {record.topic: record for record in (
     Parameters(t_s=0.0, model="cosserat", effects=("gravity",), parameters={"E0": 3e5, "EL": 2e5}, calibrated=True,
                rms_orientation_deg_before=9.0, rms_orientation_deg_after=None),
     Event(t_s=0.0, level="warning", source="tracker", message="sensor not tracked: tip MISSING"),
+    SetupCheck(t_s=0.0, check="wiring", status="fail", message="jets 2 and 3 appear swapped",
+               values={"cable2_drives_jet": 3.0}),
 )}
 # The two Foxglove topics are written by their own methods.
 FOXGLOVE_TOPICS = ("/tf", "/scene/backbone")

@@ -52,6 +52,7 @@ from .evidence import (NOISE_GAP_PER_FLOOR, OnlineEvidence, cosine, hysteresis_g
                        rmse_by_jet, rotation_between)
 from .fitting import Fit, Problem, fit, fit_candidates, session_gravity
 from .noise import NoiseFloor, estimate_noise_floor
+from .setup import SetupFix, hypotheses, with_setup_stage
 from .split import Split, split_session
 
 NONE, UNEXPLAINED = "none", "unexplained"
@@ -144,6 +145,11 @@ class Diagnosis:
     held_out_rows: np.ndarray
     held_out_sweep: np.ndarray
     elapsed_s: float
+    # The setup stage (`setup`): its hypotheses' results, what kind of verdict this is
+    # (setup | physics | none | unexplained) and, for a setup verdict, what to change.
+    setup_ranking: tuple[CandidateResult, ...] = ()
+    verdict_kind: str = ""
+    setup_fix: SetupFix | None = None
 
     @property
     def noise_floor_deg(self) -> float:
@@ -156,6 +162,9 @@ class Diagnosis:
     def as_dict(self) -> dict:
         return {
             "verdict": self.verdict,
+            "verdict_kind": self.verdict_kind,
+            "setup": {"fix": None if self.setup_fix is None else self.setup_fix.as_dict(),
+                      "ranking": [candidate.as_dict() for candidate in self.setup_ranking]},
             "explanation": self.explanation,
             "noise_floor_deg": self.noise_floor_deg,
             "baseline": {
@@ -233,11 +242,14 @@ def diagnose(steps: Dataset, model_name: str = "cosserat", known_effects: Sequen
         position_weight_rad_per_m=0.0 if not position_sigma else noise.orientation_axis_rad / position_sigma)
     baseline = fit(problem)
     say(f"baseline calibrated ({baseline.evaluations} evaluations)")
+    # Setup hypotheses are tried with the physics and decided first (`setup`).
+    candidates = hypotheses() + candidates
     fits = fit_candidates(problem, candidates, baseline, settings.workers,
                           progress=lambda done: say(f"fitted {done.effect}"))
     online = online_evidence(problem.model(), baseline.params, steps, split.held_out, problem.gravity_in_base_m_s2,
                              settings.online)
-    return _decide(problem, known, noise, baseline, candidates, fits, online, settings, started)
+    diagnosis = _decide(problem, known, noise, baseline, candidates, fits, online, settings, started)
+    return with_setup_stage(diagnosis, steps, AMBIGUITY_SCORE)
 
 
 def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseline: Fit, candidates: Sequence[Effect],
