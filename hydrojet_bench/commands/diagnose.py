@@ -18,6 +18,8 @@ from rich.panel import Panel
 from ..analysis.diagnosis import NONE, UNEXPLAINED, Diagnosis, DiagnosisSettings, diagnose
 from ..analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
 from ..analysis.diagnosis.noise import repeatability_floor
+from ..analysis.diagnosis.setup import SETUP, corrected_profile_text
+from ..files import check_writable_target
 from ..inputs import load_dataset
 from ..effects import load_effect
 from ..errors import ConvergenceError, UserError
@@ -38,6 +40,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="processes for the candidate fits (default: up to 2)")
     render.add_json_argument(parser, "the diagnosis")
     parser.add_argument("--report", type=Path, metavar="DIR", help="write figures (PNG) to this folder")
+    parser.add_argument("--export-profile", type=Path, metavar="TOML",
+                        help="for a setup verdict, write the rig profile with the corrected key (a new file)")
     parser.epilog = ("--effect names effects known to be present: they join the baseline (gravity at its nominal "
                      "weight, E0, EL, L, w_d) and are calibrated with it. Every --candidate is then tried on top.")
     parser.set_defaults(func=run)
@@ -49,18 +53,34 @@ def run(args: argparse.Namespace) -> int:
     choice = model_choice(args)  # validates --effect before the data is read
     candidates = tuple(load_effect(spec) for spec in dict.fromkeys(args.candidate)) or None
     profile, steps = load_steps(args.input, args.profile)
+    if args.export_profile is not None:
+        check_writable_target(args.export_profile, "corrected profile", overwrite=False)
+        if profile.path is None:
+            raise UserError(f"--export-profile needs the profile as a file; {profile.source} has none")
     log_damage = warn_if_incomplete(args.input)
     console = render.console_for(args)
     diagnosis = _diagnose(args, profile, steps, choice, candidates, Console(stderr=True))
     print_diagnosis(console, diagnosis, args)
     if args.json:
         render.write_json(args.json, {"data": str(args.input), **diagnosis.as_dict(), "log_damage": log_damage})
+    if args.export_profile is not None:
+        _export_profile(console, diagnosis, profile, args.export_profile)
     if args.report:
         from ..analysis.diagnosis.plots import write_diagnosis_report
 
         for path in write_diagnosis_report(args.report, diagnosis):
             console.print(f"wrote {render.plain(path)}")
     return 0
+
+
+def _export_profile(console: Console, diagnosis: Diagnosis, profile, path: Path) -> None:
+    fix = diagnosis.setup_fix
+    if fix is None or fix.profile_key is None:
+        what = f"the fix is at the rig: {fix.action}" if fix is not None else f"the verdict is {diagnosis.verdict}"
+        console.print(f"[yellow]no profile written:[/] {render.plain(what)}, not a profile key")
+        return
+    path.write_text(corrected_profile_text(profile.path.read_text(), fix))
+    console.print(f"wrote {render.plain(path)}: {fix.profile_key} = {list(fix.corrected_value)}")
 
 
 def _diagnose(args: argparse.Namespace, profile, steps, choice: ModelChoice, candidates,
@@ -107,6 +127,7 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
                       f"{candidate.heldout_orientation_rmse_deg:.3f}", f"{candidate.explained_fraction:.0%}",
                       f"{candidate.score_change:+.1f}", f"{candidate.online_correlation:+.2f}", fitted, style=style)
     console.print(table)
+    _print_setup(console, diagnosis)
     gap = diagnosis.baseline_hysteresis_gap_deg
     evidence = []
     if gap is not None:
@@ -114,7 +135,9 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
         evidence.append(f"loading/unloading gap of the baseline residuals {gap:.3f} deg "
                         f"(noise alone gives {noise_gap:.3f} deg)")
     evidence.append(f"online estimation brings the held-out error to {diagnosis.online.online_rmse_deg:.3f} deg")
-    if diagnosis.verdict == NONE:
+    if diagnosis.verdict_kind == SETUP:
+        title, style = f"verdict (setup): {diagnosis.verdict}", "magenta"
+    elif diagnosis.verdict == NONE:
         title, style = "verdict: none", "green"
     elif diagnosis.verdict == UNEXPLAINED:
         title, style = "verdict: unexplained", "yellow"
@@ -129,11 +152,36 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
     console.print(_next_steps(diagnosis, args))
 
 
+def _print_setup(console: Console, diagnosis: Diagnosis) -> None:
+    """The setup hypotheses, tried before physics, in their own table."""
+    if not diagnosis.setup_ranking:
+        return
+    table = render.table("Setup hypotheses (tried first): is the rig wired or described wrongly?",
+                         labels=("hypothesis",), numbers=("after deg", "explained", "score change"))
+    table.add_column("fitted parameters")
+    for candidate in diagnosis.setup_ranking:
+        style = "bold magenta" if candidate.effect == diagnosis.verdict else ("" if candidate.qualifies else "dim")
+        if candidate.error is not None:
+            table.add_row(candidate.effect, "-", "-", "-", f"fit failed: {candidate.error}", style="dim")
+            continue
+        fitted = ", ".join(f"{name.partition('.')[2]} {value:.4g} +- {error:.2g}"
+                           for name, (value, error) in candidate.parameters.items())
+        table.add_row(candidate.effect, f"{candidate.heldout_orientation_rmse_deg:.3f}",
+                      f"{candidate.explained_fraction:.0%}", f"{candidate.score_change:+.1f}", fitted, style=style)
+    console.print(table)
+
+
 def _next_steps(diagnosis: Diagnosis, args: argparse.Namespace) -> str:
     data = str(args.input) + (f" --profile {args.profile}" if args.profile else "")
     options = f" --model {diagnosis.model}" + "".join(f" --effect {spec}" for spec in args.effect)
     if diagnosis.verdict == NONE:
         return f"Next: the model is complete for these data; calibrate it with `calibrate {data}{options} -o p.toml`."
+    if diagnosis.verdict_kind == SETUP:
+        fix = diagnosis.setup_fix
+        if fix.profile_key is not None:
+            return (f"Next: `diagnose {data}{options} --export-profile fixed.toml` writes the corrected profile; "
+                    f"then `diagnose {args.input} --profile fixed.toml{options}`.")
+        return f"Next: {fix.action}, then record the session again."
     if diagnosis.verdict == UNEXPLAINED:
         return (f"Next: see where it fails with `calibrate {data}{options} -o p.toml` and `compare {data} --params "
                 "p.toml --online --report DIR`, write the missing physics as an effect file (see docs/examples/), "

@@ -243,7 +243,7 @@ def diagnose(steps: Dataset, model_name: str = "cosserat", known_effects: Sequen
     baseline = fit(problem)
     say(f"baseline calibrated ({baseline.evaluations} evaluations)")
     # Setup hypotheses are tried with the physics and decided first (`setup`).
-    candidates = hypotheses() + candidates
+    candidates = hypotheses(problem, baseline) + candidates
     fits = fit_candidates(problem, candidates, baseline, settings.workers,
                           progress=lambda done: say(f"fitted {done.effect}"))
     online = online_evidence(problem.model(), baseline.params, steps, split.held_out, problem.gravity_in_base_m_s2,

@@ -1,7 +1,7 @@
 """The setup stage of `diagnose`: is the rig wired or described wrongly?
 
 The hypotheses (`effects.setup`: five wrong jet wirings, a tracker tilt, a base sensor
-mounting) are fitted and scored exactly as the physical candidates, then taken out of
+mounting; a wiring only when it beats the stated one at the baseline, see `hypotheses`) are fitted and scored exactly as the physical candidates, then taken out of
 the physics ranking into their own. They are tried first: a setup hypothesis that
 qualifies takes the verdict unless a physical candidate scores better by more than
 `AMBIGUITY_SCORE`; physical candidates within that of it are listed as alternatives
@@ -13,13 +13,16 @@ by ``diagnose --export-profile``), or which valve cables to swap.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ...data.dataset import Dataset
-from ...effects.setup import BaseSensorMounting, TrackerTilt, setup_effects, tilt_rotation
+from ...effects.setup import BaseSensorMounting, JetWiring, TrackerTilt, setup_effects, tilt_rotation
+from ...errors import ConvergenceError
 from ...geometry import matrix_from_quat, quat_from_matrix, quat_multiply, so3_exp
+from .fitting import Fit, Problem, predict_path, training_chi2
 
 SETUP, PHYSICS = "setup", "physics"
 # What separates a setup error from the physics it ties with: shown beside the tie.
@@ -47,8 +50,23 @@ class SetupFix:
                 "corrected_value": None if self.corrected_value is None else list(self.corrected_value)}
 
 
-def hypotheses() -> tuple:
-    return setup_effects()
+def hypotheses(problem: Problem, baseline: Fit) -> tuple:
+    """The setup hypotheses worth a fit: the tilt and the base mounting always; a wrong
+    wiring only when, at the baseline's parameters, it already fits the training steps
+    better than the wiring the profile states (a wrong permutation of a correctly wired
+    rig is tens of degrees off, and five fits of it would double diagnose's time)."""
+    kept = []
+    for effect in setup_effects():
+        if isinstance(effect, JetWiring):
+            try:
+                predictions, positions = predict_path(problem.model(effect), baseline.params, problem.steps,
+                                                      problem.gravity_in_base_m_s2)
+            except (ConvergenceError, ValueError):
+                continue
+            if training_chi2(problem, predictions, positions)[0] >= baseline.training_chi2:
+                continue
+        kept.append(effect)
+    return tuple(kept)
 
 
 def is_setup(name: str) -> bool:
@@ -125,4 +143,25 @@ def with_setup_stage(diagnosis, steps: Dataset, ambiguity_score: float):
                    verdict_kind=kind, setup_fix=fix)
 
 
-__all__ = ["PHYSICS", "SETUP", "SetupFix", "hypotheses", "is_setup", "setup_fix", "with_setup_stage"]
+__all__ = ["PHYSICS", "SETUP", "SetupFix", "corrected_profile_text", "hypotheses", "is_setup", "setup_fix", "with_setup_stage"]
+
+
+def corrected_profile_text(text: str, fix: SetupFix) -> str:
+    """The profile's TOML text with the fix's key set to its corrected value (the line
+    replaced in its table, else added to the table, else the table appended)."""
+    if fix.profile_key is None or fix.corrected_value is None:
+        raise ValueError(f"{fix.hypothesis}: the fix is at the rig, not in the profile")
+    table, _, key = fix.profile_key.partition(".")
+    line = f"{key} = [{', '.join(repr(float(v)) for v in fix.corrected_value)}]  # corrected by diagnose"
+    lines = text.splitlines()
+    header = next((i for i, row in enumerate(lines) if row.strip() == f"[{table}]"), None)
+    if header is None:
+        return text.rstrip("\n") + f"\n\n[{table}]\n{line}\n"
+    end = next((i for i in range(header + 1, len(lines)) if lines[i].lstrip().startswith("[")), len(lines))
+    for i in range(header + 1, end):
+        if re.match(rf"\s*{re.escape(key)}\s*=", lines[i]):
+            lines[i] = line
+            break
+    else:
+        lines.insert(header + 1, line)
+    return "\n".join(lines) + "\n"
