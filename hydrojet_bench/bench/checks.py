@@ -16,6 +16,7 @@ tracker's base pose is gravity as the model will have it. A difference above
 
 from __future__ import annotations
 
+import asyncio
 import math
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, replace
@@ -174,8 +175,10 @@ async def run_setup_checks(hold: Callable[[tuple[float, float, float]], Awaitabl
             return results
         fired.append(row.tip_orientation_in_base()[0])
     await hold((0.0, 0.0, 0.0))
-    predicted = predicted_bending_rad(model, replace(params, gravity_in_base_m_s2=tuple(gravity_in_clamp)),
-                                      settings.force_n)
+    # In a worker thread: four solves must never delay the valve heartbeat.
+    predicted = await asyncio.to_thread(predicted_bending_rad, model,
+                                        replace(params, gravity_in_base_m_s2=tuple(gravity_in_clamp)),
+                                        settings.force_n)
     measured = measured_bending_rad(rest.tip_orientation_in_base()[0], np.array(fired))
     results.append(check_wiring(measured, predicted, settings))
     return results

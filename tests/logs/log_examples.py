@@ -52,14 +52,23 @@ FOXGLOVE_TOPICS = ("/tf", "/scene/backbone")
 assert set(EXAMPLES) | set(FOXGLOVE_TOPICS) == set(TOPICS)
 
 
+# Topics newer than the format-1 log (tests/logs/data): written last, so the others keep
+# the times that log has.
+ADDED_SINCE_FORMAT_1 = ("/bench/setup_check",)
+
+
 def write_all_topics(log: LogWriter, t_s: float) -> float:
     """Every topic once, at t_s, t_s + 0.01, ...; returns the next free time."""
-    for record in EXAMPLES.values():
-        log.write(msgspec.structs.replace(record, t_s=t_s))
-        t_s += 0.01
+    for topic, record in EXAMPLES.items():
+        if topic not in ADDED_SINCE_FORMAT_1:
+            log.write(msgspec.structs.replace(record, t_s=t_s))
+            t_s += 0.01
     log.write_transform(t_s, parent="base", child="tip", rotation=QUATERNION, translation_m=[0.01, 0.0, 0.068])
     t_s += 0.01
     log.write_backbone(t_s, positions_in_base_m=np.linspace([0, 0, 0], [0.01, 0.0, 0.068], 5))
+    for topic in ADDED_SINCE_FORMAT_1:
+        t_s += 0.01
+        log.write(msgspec.structs.replace(EXAMPLES[topic], t_s=t_s))
     return t_s + 0.01
 
 
