@@ -78,18 +78,23 @@ SETUP_ERRORS: dict[str, tuple[str, int]] = {
 assert {field for field, _ in SETUP_ERRORS.values()} == {f.name for f in fields(SetupErrors)}
 
 
+def setup_error_text(name: str, values: tuple[float, ...]) -> str:
+    """``name=v1,v2,...``: how `parse_setup_error` (and ``simulate --hidden``) takes it."""
+    return f"{name}=" + ",".join(f"{v:g}" for v in values)
+
+
 def parse_setup_error(text: str, errors: SetupErrors = SetupErrors()) -> SetupErrors:
     """``errors`` with one ``NAME=v1,v2,...`` applied (NAME from `SETUP_ERRORS`)."""
     name, equals, values = text.partition("=")
     if not equals or name not in SETUP_ERRORS:
-        raise UserError(f"--hidden {text!r}: a setup error is NAME=VALUES with NAME one of {', '.join(SETUP_ERRORS)}")
+        raise UserError(f"setup error {text!r}: a setup error is NAME=VALUES with NAME one of {', '.join(SETUP_ERRORS)}")
     field_name, size = SETUP_ERRORS[name]
     try:
         numbers = tuple(float(v) for v in values.split(","))
     except ValueError:
-        raise UserError(f"--hidden {text!r}: {name} takes {size} comma-separated numbers") from None
+        raise UserError(f"setup error {text!r}: {name} takes {size} comma-separated numbers") from None
     if len(numbers) != size:
-        raise UserError(f"--hidden {text!r}: {name} takes {size} comma-separated numbers, got {len(numbers)}")
+        raise UserError(f"setup error {text!r}: {name} takes {size} comma-separated numbers, got {len(numbers)}")
     if field_name == "jet_wiring":
         numbers = tuple(int(v) for v in numbers)  # type: ignore[assignment]
     changes = {f.name: getattr(errors, f.name) for f in fields(SetupErrors)}
@@ -97,4 +102,4 @@ def parse_setup_error(text: str, errors: SetupErrors = SetupErrors()) -> SetupEr
     try:
         return SetupErrors(**changes)  # type: ignore[arg-type]
     except ValueError as error:
-        raise UserError(f"--hidden {text!r}: {error}") from None
+        raise UserError(f"setup error {text!r}: {error}") from None

@@ -157,7 +157,7 @@ class Diagnosis:
 
     @property
     def winner(self) -> CandidateResult | None:
-        return next((c for c in self.ranking if c.effect == self.verdict), None)
+        return next((c for c in self.ranking + self.setup_ranking if c.effect == self.verdict), None)
 
     def as_dict(self) -> dict:
         return {

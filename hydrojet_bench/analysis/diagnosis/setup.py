@@ -109,6 +109,15 @@ def setup_fix(name: str, parameters: dict[str, tuple[float, float]], steps: Data
     raise ValueError(f"{name!r} is no setup hypothesis")
 
 
+def setup_hypothesis(errors) -> str:
+    """The hypothesis a perfect diagnosis names for a twin's `SetupErrors` with one error."""
+    if errors.jet_wiring != (1, 2, 3):
+        return "jet_wiring_" + "".join(str(j) for j in errors.jet_wiring)
+    if errors.tracker_tilt_deg != (0.0, 0.0):
+        return TrackerTilt.name
+    return BaseSensorMounting.name
+
+
 def separating_measurement(name: str) -> str:
     return SEPARATING_MEASUREMENT["jet_wiring" if name.startswith("jet_wiring_") else name]
 
@@ -143,7 +152,7 @@ def with_setup_stage(diagnosis, steps: Dataset, ambiguity_score: float):
                    verdict_kind=kind, setup_fix=fix)
 
 
-__all__ = ["PHYSICS", "SETUP", "SetupFix", "corrected_profile_text", "hypotheses", "is_setup", "setup_fix", "with_setup_stage"]
+__all__ = ["PHYSICS", "SETUP", "SetupFix", "corrected_profile_text", "hypotheses", "is_setup", "setup_fix", "setup_hypothesis", "with_setup_stage"]
 
 
 def corrected_profile_text(text: str, fix: SetupFix) -> str:
