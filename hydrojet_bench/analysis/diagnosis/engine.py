@@ -52,7 +52,7 @@ from .evidence import (NOISE_GAP_PER_FLOOR, OnlineEvidence, cosine, hysteresis_g
                        rmse_by_jet, rotation_between)
 from .fitting import Fit, Problem, fit, fit_candidates, session_gravity
 from .noise import NoiseFloor, estimate_noise_floor
-from .setup import SetupFix, hypotheses, with_setup_stage
+from .setup import SetupFix, fit_wirings, hypotheses, with_setup_stage
 from .split import Split, split_session
 
 NONE, UNEXPLAINED = "none", "unexplained"
@@ -243,9 +243,10 @@ def diagnose(steps: Dataset, model_name: str = "cosserat", known_effects: Sequen
     baseline = fit(problem)
     say(f"baseline calibrated ({baseline.evaluations} evaluations)")
     # Setup hypotheses are tried with the physics and decided first (`setup`).
-    candidates = hypotheses(problem, baseline) + candidates
-    fits = fit_candidates(problem, candidates, baseline, settings.workers,
-                          progress=lambda done: say(f"fitted {done.effect}"))
+    wirings, setups = hypotheses(problem, baseline)
+    fits = fit_wirings(problem, wirings) + fit_candidates(problem, setups + candidates, baseline, settings.workers,
+                                                          progress=lambda done: say(f"fitted {done.effect}"))
+    candidates = wirings + setups + candidates
     online = online_evidence(problem.model(), baseline.params, steps, split.held_out, problem.gravity_in_base_m_s2,
                              settings.online)
     diagnosis = _decide(problem, known, noise, baseline, candidates, fits, online, settings, started)

@@ -22,7 +22,7 @@ from ...data.dataset import Dataset
 from ...effects.setup import BaseSensorMounting, JetWiring, TrackerTilt, setup_effects, tilt_rotation
 from ...errors import ConvergenceError
 from ...geometry import matrix_from_quat, quat_from_matrix, quat_multiply, so3_exp
-from .fitting import Fit, Problem, predict_path, training_chi2
+from .fitting import Fit, Problem, fit, predict_path, training_chi2
 
 SETUP, PHYSICS = "setup", "physics"
 # What separates a setup error from the physics it ties with: shown beside the tie.
@@ -50,23 +50,31 @@ class SetupFix:
                 "corrected_value": None if self.corrected_value is None else list(self.corrected_value)}
 
 
-def hypotheses(problem: Problem, baseline: Fit) -> tuple:
-    """The setup hypotheses worth a fit: the tilt and the base mounting always; a wrong
-    wiring only when, at the baseline's parameters, it already fits the training steps
-    better than the wiring the profile states (a wrong permutation of a correctly wired
-    rig is tens of degrees off, and five fits of it would double diagnose's time)."""
-    kept = []
+def hypotheses(problem: Problem, baseline: Fit) -> tuple[tuple, tuple]:
+    """The setup hypotheses worth a fit, as (wirings, others): the tilt and the base
+    mounting always; a wrong wiring only when, at the initial (profile) parameters, it
+    fits the training steps better than the calibrated baseline does (a wrong permutation
+    of a correctly wired rig is tens of degrees off, and five fits of it would double
+    diagnose's time)."""
+    wirings, others = [], []
     for effect in setup_effects():
-        if isinstance(effect, JetWiring):
-            try:
-                predictions, positions = predict_path(problem.model(effect), baseline.params, problem.steps,
-                                                      problem.gravity_in_base_m_s2)
-            except (ConvergenceError, ValueError):
-                continue
-            if training_chi2(problem, predictions, positions)[0] >= baseline.training_chi2:
-                continue
-        kept.append(effect)
-    return tuple(kept)
+        if not isinstance(effect, JetWiring):
+            others.append(effect)
+            continue
+        try:
+            predictions, positions = predict_path(problem.model(effect), problem.initial, problem.steps,
+                                                  problem.gravity_in_base_m_s2)
+        except (ConvergenceError, ValueError):
+            continue
+        if training_chi2(problem, predictions, positions)[0] < baseline.training_chi2:
+            wirings.append(effect)
+    return tuple(wirings), tuple(others)
+
+
+def fit_wirings(problem: Problem, wirings: tuple) -> list[Fit]:
+    """Fit each wiring from the initial parameters: the baseline's optimum on miswired
+    data is a rod bent to fit the wrong jets, a bad start (solves fail from there)."""
+    return [fit(problem, wiring, start=problem.initial) for wiring in wirings]
 
 
 def is_setup(name: str) -> bool:
@@ -152,7 +160,7 @@ def with_setup_stage(diagnosis, steps: Dataset, ambiguity_score: float):
                    verdict_kind=kind, setup_fix=fix)
 
 
-__all__ = ["PHYSICS", "SETUP", "SetupFix", "corrected_profile_text", "hypotheses", "is_setup", "setup_fix", "setup_hypothesis", "with_setup_stage"]
+__all__ = ["PHYSICS", "SETUP", "SetupFix", "corrected_profile_text", "fit_wirings", "hypotheses", "is_setup", "setup_fix", "setup_hypothesis", "with_setup_stage"]
 
 
 def corrected_profile_text(text: str, fix: SetupFix) -> str:
