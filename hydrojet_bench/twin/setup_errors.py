@@ -75,7 +75,6 @@ SETUP_ERRORS: dict[str, tuple[str, int]] = {
     "tracker_tilt_deg": ("tracker_tilt_deg", 2),
     "base_sensor_rotvec": ("base_sensor_rotvec_rad", 3),
 }
-assert {field for field, _ in SETUP_ERRORS.values()} == {f.name for f in fields(SetupErrors)}
 
 
 def setup_error_text(name: str, values: tuple[float, ...]) -> str:
