@@ -42,7 +42,7 @@ class CheckSettings:
 
     force_n: float = 0.01
     settle_s: float = 2.0
-    window_s: float = 0.5
+    window_s: float = 1.0
     min_cosine: float = 0.5
     min_bend_deg: float = 0.5
     level_limit_deg: float = 2.0

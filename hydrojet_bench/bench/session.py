@@ -51,7 +51,7 @@ from ..params import PARAMETER_NAMES, ModelParameters, get_parameter
 from ..plans import CALIBRATION_SWEEP, Plan, PlanStep
 from ..config import RigConfig
 from ..profile import RigProfile
-from .checks import CheckSettings, run_setup_checks
+from .checks import CheckResult, CheckSettings, run_setup_checks
 from .clock import Clock, ScaledClock
 from .recorder import StepRecorder
 from .rig import ImuPair, open_rig
@@ -141,6 +141,7 @@ class SessionResult:
     calibration: CalibrationResult | None
     estimates: tuple[StepPrediction, ...]
     steps: Dataset | None
+    checks: tuple[CheckResult, ...] = ()  # the setup checks' outcomes (none when skipped)
 
 
 class Session:
@@ -166,6 +167,7 @@ class Session:
         # readings; samples then are no protocol data and are not logged as such.
         self._check_recorder: StepRecorder | None = None
         self._check_accel: list[tuple[float, np.ndarray]] | None = None
+        self.checks: tuple[CheckResult, ...] = ()
 
     # --- public ---------------------------------------------------------------------
 
@@ -206,7 +208,7 @@ class Session:
         steps = Dataset.concatenate(self.settled_rows) if self.settled_rows else None
         return SessionResult(request.log_path, completed, len(request.plan), self.clock.now(),
                              time.monotonic() - started, self.params, self.calibration,
-                             tuple(self.estimates), steps)
+                             tuple(self.estimates), steps, self.checks)
 
     def event(self, level: str, source: str, message: str) -> None:
         t_s = self.clock.now()
@@ -415,6 +417,7 @@ class Session:
             results = await run_setup_checks(hold, rest_accel, request.model, self.params, request.profile, settings)
         finally:
             self._check_recorder = self._check_accel = None
+        self.checks = tuple(results)
         for result in results:
             self._log.write(SetupCheck(t_s=self.clock.now(), check=result.check, status=result.status,
                                        message=result.message, values=result.values))

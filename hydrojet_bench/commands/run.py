@@ -179,6 +179,9 @@ def _print_outcome(console: Console, result, model_name: str, args: argparse.Nam
     from ..analysis.compare import compare_steps
     from .compare import print_tables
 
+    for check in result.checks:
+        if check.status != "pass":
+            console.print(f"[yellow]warning:[/] {render.plain(check.message)}")
     console.print(f"session done: {result.completed_steps}/{result.step_count} steps, "
                   f"{result.session_time_s:.0f} s session time in {result.wall_time_s:.1f} s wall time")
     if result.calibration is not None:

@@ -115,3 +115,18 @@ def test_skipping_the_checks_is_logged(tmp_path):
     assert done.returncode == 0, done.stdout + done.stderr
     assert {m.check: m.status for m in read_log(log_path).on(SetupCheck)} == {"wiring": "skipped",
                                                                                "level": "skipped"}
+
+
+def test_a_tilted_field_generator_warns_with_both_gravity_vectors(tmp_path):
+    profile = tmp_path / "tilted.toml"
+    profile.write_text((Path(__file__).parents[2] / "profiles" / "sim.toml").read_text()
+                       + "\n[twin]\ntracker_tilt_deg = [3.0, 0.0]\n")
+    log_path = tmp_path / "tilted.mcap"
+    done = subprocess.run([sys.executable, "-m", "hydrojet_bench.cli", "run", "--profile", str(profile), "--plan",
+                           "calibration:1", "--no-live", "--no-calibration", "--time-scale", "5", "--log",
+                           str(log_path)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    printed = " ".join(done.stdout.split())
+    assert "warning: level check: gravity differs by" in printed and "base IMU gravity [" in printed
+    (level,) = [m for m in read_log(log_path).on(SetupCheck) if m.check == "level"]
+    assert level.status == "warn" and abs(level.values["angle_deg"] - 3.0) < 0.2
