@@ -16,10 +16,9 @@ tracker's base pose is gravity as the model will have it. A difference above
 
 from __future__ import annotations
 
-import asyncio
 import math
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -143,17 +142,16 @@ def check_level(accel_in_clamp_m_s2: np.ndarray, gravity_in_clamp_m_s2: np.ndarr
 
 
 async def run_setup_checks(hold: Callable[[tuple[float, float, float]], Awaitable[Dataset | None]],
-                           rest_accel_m_s2: Callable[[], np.ndarray | None], model: ShootingModel,
-                           params: ModelParameters, profile: RigProfile,
-                           settings: CheckSettings = CheckSettings()) -> list[CheckResult]:
+                           rest_accel_m_s2: Callable[[], np.ndarray | None], predicted_rad: np.ndarray,
+                           profile: RigProfile, settings: CheckSettings = CheckSettings()) -> list[CheckResult]:
     """Run the level and wiring checks on a rig.
 
     hold(forces): command these jet forces (N), hold them ``settings.settle_s`` and return
     the settled EM row (a one-row `Dataset`), None when the tracker gave nothing.
     rest_accel_m_s2(): the base IMU's mean accelerometer reading (sensor frame, m/s^2)
     over the settled end of the last hold, None without IMUs.
-    params: the parameters the model predicts with (gravity replaced by the measured
-    base pose's)."""
+    predicted_rad: `predicted_bending_rad` at the profile's nominal clamp pose, computed
+    before the valves are armed (solves must not hold up the valve heartbeat)."""
     rest = await hold((0.0, 0.0, 0.0))
     if rest is None:
         return [CheckResult(WIRING, "unavailable", "setup checks skipped: the tracker gave no pose at rest", {})]
@@ -175,10 +173,6 @@ async def run_setup_checks(hold: Callable[[tuple[float, float, float]], Awaitabl
             return results
         fired.append(row.tip_orientation_in_base()[0])
     await hold((0.0, 0.0, 0.0))
-    # In a worker thread: four solves must never delay the valve heartbeat.
-    predicted = await asyncio.to_thread(predicted_bending_rad, model,
-                                        replace(params, gravity_in_base_m_s2=tuple(gravity_in_clamp)),
-                                        settings.force_n)
     measured = measured_bending_rad(rest.tip_orientation_in_base()[0], np.array(fired))
-    results.append(check_wiring(measured, predicted, settings))
+    results.append(check_wiring(measured, predicted_rad, settings))
     return results

@@ -51,7 +51,7 @@ from ..params import PARAMETER_NAMES, ModelParameters, get_parameter
 from ..plans import CALIBRATION_SWEEP, Plan, PlanStep
 from ..config import RigConfig
 from ..profile import RigProfile
-from .checks import CheckResult, CheckSettings, run_setup_checks
+from .checks import CheckResult, CheckSettings, predicted_bending_rad, run_setup_checks
 from .clock import Clock, ScaledClock
 from .recorder import StepRecorder
 from .rig import ImuPair, open_rig
@@ -168,6 +168,7 @@ class Session:
         self._check_recorder: StepRecorder | None = None
         self._check_accel: list[tuple[float, np.ndarray]] | None = None
         self.checks: tuple[CheckResult, ...] = ()
+        self._predicted_bending: np.ndarray | None = None
 
     # --- public ---------------------------------------------------------------------
 
@@ -252,6 +253,11 @@ class Session:
         """The first solve of a process loads the compiled kernels (about a second; far
         longer on a busy machine): done before any valve is armed."""
         await asyncio.to_thread(self.request.model.solve, np.zeros(3), self.params)
+        if self.request.setup_checks:
+            # The wiring check's model directions, at the profile's clamp pose: solved
+            # here, as no solve may hold up the valve heartbeat once armed.
+            self._predicted_bending = await asyncio.to_thread(
+                predicted_bending_rad, self.request.model, self.params, CheckSettings().force_n)
 
     # --- streams --------------------------------------------------------------------
 
@@ -414,7 +420,7 @@ class Session:
             return np.mean(recent, axis=0) if recent else None
 
         try:
-            results = await run_setup_checks(hold, rest_accel, request.model, self.params, request.profile, settings)
+            results = await run_setup_checks(hold, rest_accel, self._predicted_bending, request.profile, settings)
         finally:
             self._check_recorder = self._check_accel = None
         self.checks = tuple(results)
