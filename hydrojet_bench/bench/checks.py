@@ -136,7 +136,7 @@ def check_level(accel_in_clamp_m_s2: np.ndarray, gravity_in_clamp_m_s2: np.ndarr
                f"base pose {np.round(expected, 2).tolist()} m/s^2 (clamp frame)")
     if angle_deg > settings.level_limit_deg:
         return CheckResult(LEVEL, "warn", f"level check: gravity differs by {angle_deg:.1f} deg (> "
-                           f"{settings.level_limit_deg:g}): is the field generator level and [gravity] right? "
+                           f"{settings.level_limit_deg:g}): is the field generator level and gravity.in_tracker_m_s2 right? "
                            + vectors, values)
     return CheckResult(LEVEL, "pass", f"level check passed ({angle_deg:.2f} deg): " + vectors, values)
 

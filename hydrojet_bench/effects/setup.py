@@ -63,7 +63,7 @@ class TrackerTilt:
     name: ClassVar[str] = "tracker_tilt"
     explanation: ClassVar[str] = (
         "Gravity in the tracker frame is not the profile's: the EM field generator stands "
-        "tilted, or [gravity] in_tracker_m_s2 is wrong. The weight then pulls the rod "
+        "tilted, or the profile's gravity.in_tracker_m_s2 is wrong. The weight then pulls the rod "
         "sideways to where the model expects, by the same amount whatever the jets do, "
         "most where the rod bends across gravity."
     )
@@ -86,7 +86,7 @@ class BaseSensorMounting:
     name: ClassVar[str] = "base_sensor_mounting"
     explanation: ClassVar[str] = (
         "The base sensor sits in the clamp turned by a rotation (rx, ry, rz, clamp frame) "
-        "that [base_sensor] rotation_in_base does not state. Every tip pose is then read "
+        "that the profile's base_sensor.rotation_in_base does not state. Every tip pose is then read "
         "in a turned frame, and gravity carried through the base pose is turned alike: "
         "about the rod axis it looks like a turned jet ring (jet_misalignment), across it "
         "like a tilted tracker plus a tip-sensor mounting."

@@ -32,8 +32,8 @@ def setup_warnings(names: tuple[str, ...], values: tuple[float, ...],
                         "wiring")
     weight = fitted.get("gravity.weight_scale")
     if weight is not None and not PLAUSIBLE_WEIGHT_SCALE[0] <= weight <= PLAUSIBLE_WEIGHT_SCALE[1]:
-        warnings.append(f"weight scale {weight:.2f}, far from 1: check [capsule] mass_kg and [rod] density_kg_m3, "
-                        "the jet forces' unit (N), and whether the tracker is level ([gravity] in_tracker_m_s2)")
+        warnings.append(f"weight scale {weight:.2f}, far from 1: check capsule.mass_kg and rod.density_kg_m3, "
+                        "the jet forces' unit (N), and whether the tracker is level (gravity.in_tracker_m_s2)")
     for name in ("E0", "EL"):
         if name in fitted:
             lower, upper = bounds(name)

@@ -105,15 +105,15 @@ def setup_fix(name: str, parameters: dict[str, tuple[float, float]], steps: Data
         corrected = tuple(round(float(v), 4) for v in clamp @ turned)
         angle = float(np.degrees(np.hypot(values["about_u_rad"], values["about_v_rad"])))
         return SetupFix(name, f"gravity in the tracker frame is {angle:.1f} deg off the profile's: level the field "
-                              f"generator, or set [gravity] in_tracker_m_s2 = {list(corrected)}",
+                              f"generator, or set gravity.in_tracker_m_s2 = {list(corrected)}",
                         "gravity.in_tracker_m_s2", corrected)
     if name == BaseSensorMounting.name:
         rotation = so3_exp([values["rx_rad"], values["ry_rad"], values["rz_rad"]])
         corrected_q = quat_multiply(quat_from_matrix(rotation), np.asarray(profile.base_sensor.rotation_in_body))
         corrected = tuple(round(float(v), 6) for v in corrected_q * np.sign(corrected_q[0] or 1.0))
         angle = float(np.degrees(np.linalg.norm([values["rx_rad"], values["ry_rad"], values["rz_rad"]])))
-        return SetupFix(name, f"the base sensor sits {angle:.1f} deg turned in the clamp: set [base_sensor] "
-                              f"rotation_in_base = {list(corrected)}", "base_sensor.rotation_in_base", corrected)
+        return SetupFix(name, f"the base sensor sits {angle:.1f} deg turned in the clamp: set "
+                              f"base_sensor.rotation_in_base = {list(corrected)}", "base_sensor.rotation_in_base", corrected)
     raise ValueError(f"{name!r} is no setup hypothesis")
 
 
