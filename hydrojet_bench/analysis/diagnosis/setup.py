@@ -100,7 +100,8 @@ def setup_fix(name: str, parameters: dict[str, tuple[float, float]], steps: Data
         gravity_in_base = steps.gravity_in_base_m_s2().mean(axis=0)
         turned = tilt_rotation(gravity_in_base, values["about_u_rad"], values["about_v_rad"]) @ gravity_in_base
         # The base is static in a session diagnose can split (see fitting.session_gravity).
-        clamp_q = profile.clamp_orientation_in_tracker(steps.base_orientation).mean(axis=0)
+        clamps = profile.clamp_orientation_in_tracker(steps.base_orientation)
+        clamp_q = (clamps * np.sign(clamps @ clamps[0])[:, None]).mean(axis=0)  # q and -q are one rotation
         clamp = matrix_from_quat(clamp_q / np.linalg.norm(clamp_q))
         corrected = tuple(round(float(v), 4) for v in clamp @ turned)
         angle = float(np.degrees(np.hypot(values["about_u_rad"], values["about_v_rad"])))
