@@ -43,7 +43,7 @@ from ..estimation.calibration import CalibrationResult, calibrate_dataset
 from ..estimation.path import PathPredictor, StepPrediction
 from ..logs import LogWriter, floats
 from ..logs.topics import (Disturbance, EmFrame, EmTool, Event, ImuOrientation, ImuRaw, ModelPrediction,
-                           Parameters, Sample, Step, StreamRate, ValveCommand, ValveReply)
+                           Parameters, Sample, SetupCheck, Step, StreamRate, ValveCommand, ValveReply)
 from ..models.shooting import ShootingModel
 from ..effects import effect_values
 from ..geometry import quat_from_matrix
@@ -51,6 +51,7 @@ from ..params import PARAMETER_NAMES, ModelParameters, get_parameter
 from ..plans import CALIBRATION_SWEEP, Plan, PlanStep
 from ..config import RigConfig
 from ..profile import RigProfile
+from .checks import CheckResult, CheckSettings, predicted_bending_rad, run_setup_checks
 from .clock import Clock, ScaledClock
 from .recorder import StepRecorder
 from .rig import ImuPair, open_rig
@@ -108,6 +109,7 @@ class SessionRequest:
     command_line: str = ""
     warnings: tuple[str, ...] = ()  # about the request (say, clipped plan steps): logged as events at the start
     overwrite_log: bool = False  # replace an existing log_path (else refused, see LogWriter)
+    setup_checks: bool = True  # the wiring and level checks before the plan (`bench.checks`)
 
 
 @dataclass
@@ -145,6 +147,7 @@ class SessionResult:
     estimates: tuple[StepPrediction, ...]
     steps: Dataset | None
     stream_rates: tuple[StreamRateFigure, ...] = ()  # over the whole session, one per stream that ran
+    checks: tuple[CheckResult, ...] = ()  # the setup checks' outcomes (none when skipped)
 
 
 class Session:
@@ -172,6 +175,12 @@ class Session:
                        "imu": StreamRateMeter("imu", request.settings.imu.rate_hz)}
         self._rate_warned: set[str] = set()
         self._overall_rates: tuple[StreamRateFigure, ...] = ()
+        # While the setup checks run: their own recorder and the base accelerometer's
+        # readings; samples then are no protocol data and are not logged as such.
+        self._check_recorder: StepRecorder | None = None
+        self._check_accel: list[tuple[float, np.ndarray]] | None = None
+        self.checks: tuple[CheckResult, ...] = ()
+        self._predicted_bending: np.ndarray | None = None
 
     # --- public ---------------------------------------------------------------------
 
@@ -213,7 +222,7 @@ class Session:
         steps = Dataset.concatenate(self.settled_rows) if self.settled_rows else None
         return SessionResult(request.log_path, completed, len(request.plan), self.clock.now(),
                              time.monotonic() - started, self.params, self.calibration,
-                             tuple(self.estimates), steps, self._overall_rates)
+                             tuple(self.estimates), steps, self._overall_rates, self.checks)
 
     def event(self, level: str, source: str, message: str) -> None:
         t_s = self.clock.now()
@@ -259,6 +268,11 @@ class Session:
         """The first solve of a process loads the compiled kernels (about a second; far
         longer on a busy machine): done before any valve is armed."""
         await asyncio.to_thread(self.request.model.solve, np.zeros(3), self.params)
+        if self.request.setup_checks:
+            # The wiring check's model directions, at the profile's clamp pose: solved
+            # here, as no solve may hold up the valve heartbeat once armed.
+            self._predicted_bending = await asyncio.to_thread(
+                predicted_bending_rad, self.request.model, self.params, CheckSettings().force_n)
 
     # --- streams --------------------------------------------------------------------
 
@@ -319,6 +333,8 @@ class Session:
             base_p = np.array(base.position_mm) / 1000.0
             tip_p = np.array(tip.position_mm) / 1000.0
             self.em.add(t_s, np.array(base.orientation), np.array(tip.orientation), base_p, tip_p)
+            if self._check_recorder is not None:
+                self._check_recorder.add(t_s, np.array(base.orientation), np.array(tip.orientation), base_p, tip_p)
             self._write_sample("em", t_s, base.orientation, tip.orientation, base_p, tip_p)
 
     async def _imu_stream(self, imus: ImuPair) -> None:
@@ -340,6 +356,8 @@ class Session:
                 continue
             meter.delivered()
             self.status.imu_samples += 1
+            if self._check_accel is not None:
+                self._check_accel.append((base.t_s, np.asarray(base.accel_m_s2, dtype=float)))
             for name, chip, sample in (("base", base_chip, base), ("tip", tip_chip, tip)):
                 log.write(ImuRaw(t_s=sample.t_s, sensor=name, address=chip.address,
                                  accel_m_s2=floats(sample.accel_m_s2), gyro_rad_s=floats(sample.gyro_rad_s),
@@ -353,6 +371,8 @@ class Session:
             self._write_sample("imu", t_s, base_q, tip_q, None, None)
 
     def _write_sample(self, source: str, t_s: float, base_q, tip_q, base_p, tip_p) -> None:
+        if self._check_recorder is not None:
+            return
         step = self.em.step
         self._log.write(Sample(
             t_s=t_s, source=source,
@@ -400,6 +420,7 @@ class Session:
         status = self.status
         timing = request.settings.session
         remaining = request.plan.duration_s
+        await self._setup_checks(valves)
         for index, step in enumerate(request.plan):
             if step.sweep != CALIBRATION_SWEEP:
                 await self._finish_calibration()
@@ -424,6 +445,45 @@ class Session:
         status.phase = "done"
         self.on_update(status)
         return len(request.plan)
+
+    async def _setup_checks(self, valves: ValveController) -> None:
+        """The wiring and level checks (`bench.checks`), logged; a miswired rig stops here,
+        before any protocol data."""
+        request = self.request
+        if not request.setup_checks:
+            for check in ("wiring", "level"):
+                self._log.write(SetupCheck(t_s=self.clock.now(), check=check, status="skipped",
+                                           message="skipped (--skip-checks)"))
+            return
+        settings = CheckSettings()
+        self.status.phase = "setup checks"
+        self._check_recorder = StepRecorder(request.profile, with_positions=True, source="em")
+        self._check_accel = []
+
+        async def hold(forces) -> Dataset | None:
+            self._check_recorder.begin(PlanStep(forces, CALIBRATION_SWEEP, 0, settings.settle_s))
+            self._check_accel.clear()
+            await self._command(valves, forces)
+            await self.clock.sleep_until(self.clock.now() + settings.settle_s)
+            return self._check_recorder.settled(self.clock.now(), settings.window_s)
+
+        def rest_accel():
+            recent = [accel for t_s, accel in self._check_accel if t_s >= self.clock.now() - settings.window_s]
+            return np.mean(recent, axis=0) if recent else None
+
+        try:
+            results = await run_setup_checks(hold, rest_accel, self._predicted_bending, request.profile, settings)
+        finally:
+            self._check_recorder = self._check_accel = None
+        self.checks = tuple(results)
+        for result in results:
+            self._log.write(SetupCheck(t_s=self.clock.now(), check=result.check, status=result.status,
+                                       message=result.message, values=result.values))
+            level = {"pass": "info", "fail": "error"}.get(result.status, "warning")
+            self.event(level, "setup check", result.message)
+        failed = next((result for result in results if result.failed), None)
+        if failed is not None:
+            raise UserError(f"{failed.message} (skip with --skip-checks)")
 
     async def _command(self, valves: ValveController, forces) -> None:
         t_s = self.clock.now()

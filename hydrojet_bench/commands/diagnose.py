@@ -25,6 +25,7 @@ from ..analysis.diagnosis.engine import DEFAULT_DEPTH, default_candidates
 from ..analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
 from ..analysis.diagnosis.noise import repeatability_floor
 from ..analysis.diagnosis.separate import separating_plan, write_separating_plan
+from ..analysis.diagnosis.setup import SETUP, corrected_profile_text
 from ..plans import DEFAULT_SETTLE_S
 from ..inputs import load_dataset
 from ..effects import Effect, load_effect
@@ -61,6 +62,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--export", type=Path, metavar="PARAMS",
                         help="write the verdict's calibrated parameters (the model with the named effect, fitted as "
                              "scored; the baseline's when none is named) as a parameter file (a new file)")
+    parser.add_argument("--export-profile", type=Path, metavar="TOML",
+                        help="for a setup verdict, write the rig profile with the corrected key (a new file)")
     parser.epilog = ("--effect names effects known to be present: they join the baseline (gravity at its nominal "
                      "weight, E0, EL, L, w_d) and are calibrated with it. Every --candidate is then tried on top.")
     parser.set_defaults(func=run)
@@ -79,6 +82,10 @@ def run(args: argparse.Namespace) -> int:
         make_folder_for(args.export)
         check_writable_target(args.export, "parameter file", overwrite=False)  # before the minutes of fitting
     profile, steps = load_steps(args.input, args.profile)
+    if args.export_profile is not None:
+        check_writable_target(args.export_profile, "corrected profile", overwrite=False)
+        if profile.path is None:
+            raise UserError(f"--export-profile needs the profile as a file; {profile.source} has none")
     log_damage = warn_if_incomplete(args.input)
     console = render.console_for(args)
     diagnosis = _diagnose(args, profile, steps, choice, candidates, Console(stderr=True))
@@ -90,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
     print_next_steps(console, diagnosis, args, tried)
     if args.json:
         render.write_json(args.json, {"data": str(args.input), **diagnosis.as_dict(), "log_damage": log_damage})
+    if args.export_profile is not None:
+        _export_profile(console, diagnosis, profile, args.export_profile)
     if args.report:
         from ..analysis.diagnosis.plots import write_diagnosis_report
 
@@ -118,6 +127,17 @@ def _write_separating_plan(args: argparse.Namespace, diagnosis: Diagnosis) -> Pa
     # The default name takes the next free number instead of replacing an earlier plan.
     path = create_numbered(folder / "separating-plan.toml", "plan file")
     return write_separating_plan(path, plan, _tied(diagnosis), overwrite=True)
+
+
+def _export_profile(console: Console, diagnosis: Diagnosis, profile, path: Path) -> None:
+    fix = diagnosis.setup_fix
+    if fix is None or fix.profile_key is None:
+        what = f"the fix is at the rig: {fix.action}" if fix is not None else f"the verdict is {diagnosis.verdict}"
+        console.print(f"[yellow]no profile written:[/] {render.plain(what)}, not a profile key")
+        return
+    text = corrected_profile_text(profile.path.read_text(), fix)
+    publish(path, "profile", lambda partial: partial.write_text(text))
+    console.print(f"wrote {render.plain(path)}: {fix.profile_key} = {list(fix.corrected_value)}")
 
 
 def _diagnose(args: argparse.Namespace, profile, steps, choice: ModelChoice, candidates,
@@ -168,6 +188,7 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
                       f"{candidate.heldout_orientation_rmse_deg:.3f}", f"{candidate.explained_fraction:.0%}",
                       f"{candidate.score_change:+.1f}", f"{candidate.online_correlation:+.2f}", fitted, style=style)
     console.print(table)
+    _print_setup(console, diagnosis)
     gap = diagnosis.baseline_hysteresis_gap_deg
     evidence = []
     if gap is not None:
@@ -175,7 +196,9 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
         evidence.append(f"loading/unloading gap of the baseline residuals {gap:.3f} deg "
                         f"(noise alone gives {noise_gap:.3f} deg)")
     evidence.append(f"online estimation brings the held-out error to {diagnosis.online.online_rmse_deg:.3f} deg")
-    if diagnosis.verdict == NONE:
+    if diagnosis.verdict_kind == SETUP:
+        title, style = f"verdict (setup): {diagnosis.verdict}", "magenta"
+    elif diagnosis.verdict == NONE:
         title, style = "verdict: none", "green"
     elif diagnosis.verdict == UNEXPLAINED:
         title, style = "verdict: unexplained", "yellow"
@@ -239,6 +262,15 @@ def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Name
     """What to run next, as commands that run as printed (one per line, never wrapped)."""
     data = input_words(args)
     known = ("--model", diagnosis.model, *effect_words(args.effect))
+    if diagnosis.verdict_kind == SETUP:
+        fix = diagnosis.setup_fix
+        if fix.profile_key is None:
+            print_next(console, f"{fix.action}, then record the session again.", [])
+            return
+        print_next(console, "write the corrected profile and check it with", [
+            command("diagnose", *data, *known, "--export-profile", "fixed.toml"),
+            command("diagnose", args.input, "--profile", "fixed.toml", *known)])
+        return
     found = _found_effects(diagnosis, candidates)
     if not found:
         calibrate = command("calibrate", *data, *known, "-o", "p.toml")
@@ -263,3 +295,22 @@ def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Name
     print_next(console, f"with {' + '.join(effect.name for effect in found)} the held-out error should fall from "
                f"{diagnosis.baseline_heldout_rmse_deg:.3f} deg to about "
                f"{diagnosis.found[-1].heldout_orientation_rmse_deg:.3f} deg; watch it with", lines)
+
+
+def _print_setup(console: Console, diagnosis: Diagnosis) -> None:
+    """The setup hypotheses, tried before physics, in their own table."""
+    if not diagnosis.setup_ranking:
+        return
+    table = render.table("Setup hypotheses (tried first): is the rig wired or described wrongly?",
+                         labels=("hypothesis",), numbers=("after deg", "explained", "score change"))
+    table.add_column("fitted parameters")
+    for candidate in diagnosis.setup_ranking:
+        style = "bold magenta" if candidate.effect == diagnosis.verdict else ("" if candidate.qualifies else "dim")
+        if candidate.error is not None:
+            table.add_row(candidate.effect, "-", "-", "-", f"fit failed: {candidate.error}", style="dim")
+            continue
+        fitted = ", ".join(f"{name.partition('.')[2]} {value:.4g} +- {error:.2g}"
+                           for name, (value, error) in candidate.parameters.items())
+        table.add_row(candidate.effect, f"{candidate.heldout_orientation_rmse_deg:.3f}",
+                      f"{candidate.explained_fraction:.0%}", f"{candidate.score_change:+.1f}", fitted, style=style)
+    console.print(table)

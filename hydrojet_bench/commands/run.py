@@ -66,6 +66,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "the server has no authentication: another HOST opens the session to that network)")
     parser.epilog = ("Progress (the live view, or a line per sweep) and warnings go to standard error; what runs, "
                      "its Table II and the next commands to standard output.")
+    parser.add_argument("--skip-checks", action="store_true",
+                        help="skip the wiring and level checks before the plan (the log records the skip)")
     render.add_exit_codes(parser, {143: "stopped by SIGTERM (valves closed, log finished)"})
     parser.set_defaults(func=run)
 
@@ -113,7 +115,8 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
                              effects=choice.effect_specs, params=choice.parameters(profile.model_parameters()),
                              calibrate=not args.no_calibration, calibration_names=choice.calibration_names,
                              seed=args.seed, warnings=(clipped_warning,) if clipped_warning else (),
-                             command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]), overwrite_log=overwrite)
+                             command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]), overwrite_log=overwrite,
+                             setup_checks=not args.skip_checks)
     console = render.console_for(args)
     progress = render.progress_console()
     rig = "simulated rig" if settings.transports.simulated else "rig"
@@ -213,6 +216,9 @@ def _print_outcome(console: Console, result, model_name: str, args: argparse.Nam
     from ..analysis.compare import compare_steps
     from .compare import print_tables
 
+    for check in result.checks:
+        if check.status != "pass":
+            console.print(f"[yellow]warning:[/] {render.plain(check.message)}")
     console.print(f"session done: {result.completed_steps}/{result.step_count} steps, "
                   f"{result.session_time_s:.0f} s session time in {result.wall_time_s:.1f} s wall time")
     if result.calibration is not None:

@@ -16,7 +16,7 @@ from ..errors import UserError
 from ..files import check_writable_target, make_folder_for, publish
 from ..plans import paper_protocol
 from ..profile import load_profile
-from ..twin import DigitalTwin, TwinConfig
+from ..twin import SETUP_ERRORS, DigitalTwin, SetupErrors, TwinConfig, parse_setup_error
 from ..twin.hidden import HIDDEN, inert_effects, parse_hidden
 from . import render
 from .common import check_seed
@@ -31,7 +31,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--hidden", action="append", default=[], metavar="EFFECT[=VALUE]",
                         help="physics the twin has and the models may not: NAME=VALUE (a vector comma-separated, "
                              "in the order of its parameters), NAME:PARAMETER=VALUE, or path/to/file.py:Class "
-                             f"(repeatable; replaces the profile's [twin] hidden_effects). Names: {', '.join(HIDDEN)}")
+                             f"(repeatable; replaces the profile's [twin] hidden_effects). Names: {', '.join(HIDDEN)}; "
+                             "setup errors (the rig described wrongly): "
+                             + ", ".join(f"{name}=..." for name in SETUP_ERRORS))
     parser.add_argument("--seed", type=int, default=None, help="noise seed (default: the profile's, else 0)")
     parser.set_defaults(func=run)
 
@@ -42,8 +44,18 @@ def run(args: argparse.Namespace) -> int:
     check_writable_target(args.output, "recording", overwrite=args.overwrite)  # before minutes of simulation
     profile = load_profile(args.profile)
     changes: dict[str, object] = {}
-    if args.hidden:
-        choice = parse_hidden(args.hidden)
+    setup_specs = [spec for spec in args.hidden if spec.partition("=")[0] in SETUP_ERRORS]
+    physics_specs = [spec for spec in args.hidden if spec not in setup_specs]
+    setup = SetupErrors()
+    for spec in setup_specs:
+        setup = parse_setup_error(spec, setup)
+    if setup_specs and not setup.any:
+        raise UserError(f"--hidden {' '.join(setup_specs)}: that is the rig as the profile describes it and would "
+                        "hide nothing; give a wrong wiring, a tilt or a rotation")
+    if setup.any:
+        changes["setup"] = setup
+    if physics_specs:
+        choice = parse_hidden(physics_specs)
         names = {effect.name for effect in choice.effects}
         # The profile's values still hold for the effects named here; the command line wins.
         kept = {key: value for key, value in profile.config.twin.hidden_effect_values.items()
@@ -66,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     recording = twin.run_plan(paper_protocol())
     dataset = recording.to_dataset(profile, f"twin seed {config.seed}")
     rows = publish(args.output, "recording", lambda partial: write_csv(dataset, partial), overwrite=args.overwrite)
-    hidden_names = ", ".join(effect.name for effect in hidden) or "none"
+    hidden_names = ", ".join([effect.name for effect in hidden] + setup_specs) or "none"
     console = render.console()
     console.print(f"wrote {rows} samples (229 steps: 40 calibration poses, 9 sweeps) to {args.output}; "
                   f"hidden effects: {hidden_names}", markup=False)

@@ -418,6 +418,12 @@ class TwinTable(Table, kw_only=True):
     hidden_effect_values: dict[str, Finite] = {}  # "effect.parameter" = value
     true_parameters: dict[str, Finite] = {}       # flat names: E0, EL, L, wd_fx .. wd_mz
     noise: SensorNoise = msgspec.field(default_factory=SensorNoise)
+    # Setup errors the twin simulates (`twin.SetupErrors`): cable i drives jet
+    # jet_wiring[i]; the field generator tilted about tracker x then y (deg); the base
+    # sensor turned in the clamp by this rotation vector (rad, clamp frame).
+    jet_wiring: tuple[int, int, int] = (1, 2, 3)
+    tracker_tilt_deg: tuple[Finite, Finite] = (0.0, 0.0)
+    base_sensor_rotvec_rad: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
 
 
 # --- the whole profile ---------------------------------------------------------------

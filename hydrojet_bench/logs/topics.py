@@ -192,6 +192,19 @@ class StreamRate(LogRecord, kw_only=True):
     whole_session: Annotated[bool, Meta(description="true for the session's closing figure")]
 
 
+class SetupCheck(LogRecord, kw_only=True):
+    """A check run before the protocol (`bench.checks`): the wiring or the level."""
+
+    topic: ClassVar[str] = "/bench/setup_check"
+    check: Annotated[Literal["wiring", "level"], Meta(description="which check")]
+    status: Annotated[Literal["pass", "fail", "warn", "skipped", "unavailable"], Meta(
+        description='"fail" stopped the session; "skipped" by the --skip-checks flag; "unavailable" without the '
+                    'sensors it needs')]
+    message: Annotated[str, Meta(description="the line shown to the user")]
+    values: Annotated[dict[str, float], Meta(description="the figures behind it (bends deg, cosines, gravity "
+                                                         "vectors m/s^2, angle deg)")] = {}
+
+
 TOPICS: dict[str, type[LogRecord]] = {record.topic: record for record in (
     Sample, ImuRaw, ImuOrientation, EmFrame, ValveCommand, ValveReply, Step, ModelPrediction, Disturbance,
-    Parameters, Event, StreamRate, FrameTransform, SceneUpdate)}
+    Parameters, Event, StreamRate, FrameTransform, SceneUpdate, SetupCheck)}

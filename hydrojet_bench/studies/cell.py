@@ -16,7 +16,8 @@ from ..bench.plan_choice import choose_plan
 from ..effects import load_effect
 from ..plans import Plan, calibration_plan, validation_sweeps
 from ..profile import load_profile
-from ..twin import DigitalTwin, TwinConfig
+from ..analysis.diagnosis.setup import setup_hypothesis
+from ..twin import DigitalTwin, TwinConfig, parse_setup_error, setup_error_text
 from .cells import NONE, Cell
 
 # The rod lying along the tracker's x axis: the base frame's z turned a quarter turn
@@ -54,6 +55,8 @@ def expected_verdict(cell: Cell) -> str | None:
     is a partial answer, see the report)."""
     if cell.kind == "pair":
         return None
+    if cell.setup is not None:
+        return setup_hypothesis(parse_setup_error(setup_error_text(*cell.setup)))
     if cell.kind == NONE:
         return NONE
     from_file = ":" in cell.effects[0]  # library effects go by name, others by path/to/file.py:Class
@@ -112,6 +115,8 @@ def _simulate_and_diagnose(cell: Cell) -> Diagnosis:
                                       for field in noise.__struct_fields__})
     if cell.orientation == "horizontal":
         changes["base_orientation_in_tracker"] = HORIZONTAL_BASE_ORIENTATION
+    if cell.setup is not None:
+        changes["setup"] = parse_setup_error(setup_error_text(*cell.setup))
     config = TwinConfig.from_profile(profile, **changes)
     recording = DigitalTwin(config).run_plan(study_plan(cell.plan, cell.seed), record_window_s=RECORD_WINDOW_S)
     steps = recording.to_dataset(profile, f"study cell {cell.id}").quasistatic_steps()

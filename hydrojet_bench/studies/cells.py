@@ -12,6 +12,7 @@ import itertools
 import msgspec
 
 from ..effects import load_effect
+from ..twin.setup_errors import setup_error_text
 from .spec import Study
 
 NONE = "none"
@@ -20,7 +21,8 @@ NONE = "none"
 class Cell(msgspec.Struct, frozen=True):
     """One scenario.
 
-    kind: "none", "sweep" (one effect, one size) or "pair". truth: the hidden effects'
+    kind: "none", "sweep" (one effect, one size), "pair" or "setup" (a setup error,
+    ``setup`` = (`twin.SETUP_ERRORS` name, values), physics nominal). truth: the hidden effects'
     names, "+"-joined ("none" without any). effects: their specs
     (library names or absolute ``file.py:Class``). values: ``"effect.parameter" -> value``
     in the parameter's own unit. parameter/size: the swept parameter and its value (a
@@ -42,10 +44,14 @@ class Cell(msgspec.Struct, frozen=True):
     size: float | None = None
     size_default: float | None = None
     unit: str = ""
+    setup: tuple[str, tuple[float, ...]] | None = None
 
     @property
     def id(self) -> str:
-        return hashlib.sha256(msgspec.json.encode(self)).hexdigest()[:16]
+        fields = msgspec.to_builtins(self)
+        if self.setup is None:
+            del fields["setup"]  # cells without one keep the ids they had before setup cells
+        return hashlib.sha256(msgspec.json.encode(fields)).hexdigest()[:16]
 
     @property
     def scenario(self) -> str:
@@ -53,6 +59,8 @@ class Cell(msgspec.Struct, frozen=True):
             return f"{self.parameter}={self.size:.4g}"
         if self.kind == "pair":
             return " + ".join(f"{name}={value:.4g}" for name, value in self.values) or self.truth
+        if self.setup is not None:
+            return setup_error_text(*self.setup)
         return NONE
 
 
@@ -68,12 +76,15 @@ def expand(study: Study) -> tuple[Cell, ...]:
     for specs, values in study.pairs:
         scenarios.append(("pair", specs, values, "", None, None, ""))
     names = {spec: load_effect(spec).name for _, specs, *_ in scenarios for spec in specs}
+    scenarios.extend(("setup", (), (), "", None, None, "", setup) for setup in study.setups)
     cells = []
-    for (kind, effects, values, parameter, size, default, unit), profile, orientation, plan, model, noise, seed in itertools.product(
+    for (kind, effects, values, parameter, size, default, unit, *setup), profile, orientation, plan, model, noise, seed in itertools.product(
             scenarios, study.profiles, study.orientations, study.plans, study.models, study.noise_scales,
             study.seeds):
         cells.append(Cell(profile=profile, orientation=orientation, plan=plan, model=model, seed=seed,
-                          noise_scale=noise, kind=kind, truth="+".join(names[s] for s in effects) or NONE,
+                          noise_scale=noise, kind=kind,
+                          truth=setup[0][0] if setup else "+".join(names[s] for s in effects) or NONE,
                           effects=effects, values=values, parameter=parameter, size=size,
-                          size_default=default, unit=unit))
+                          size_default=default, unit=unit, setup=setup[0] if setup else None))
     return tuple(cells)
+

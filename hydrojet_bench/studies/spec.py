@@ -21,6 +21,10 @@
     effects = ["jet_gain", "base_compliance"]
     values = {"jet_gain.gain_1" = 0.8, "base_compliance.compliance_rad_per_nm" = 20.0}
 
+    [[setup]]                         # a setup error (`twin.SETUP_ERRORS`), physics nominal
+    error = "tracker_tilt_deg"        # jet_wiring, tracker_tilt_deg or base_sensor_rotvec
+    sizes = [[2.0, 1.0], [6.0, -3.0]] # each size: the error's values (as simulate --hidden)
+
 Every size is checked against the effect parameter's bounds; a mistake is a
 `UserError` naming the file and the dotted key.
 """
@@ -37,6 +41,7 @@ from ..config.loading import convert, read_toml
 from ..effects import Effect, load_effect
 from ..errors import UserError
 from ..models import MODELS
+from ..twin.setup_errors import parse_setup_error, setup_error_text
 
 Orientation = Literal["hanging", "horizontal"]
 Positive = Annotated[float, msgspec.Meta(gt=0.0)]
@@ -69,6 +74,11 @@ class EffectPair(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     values: dict[str, float] = {}
 
 
+class SetupSweep(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    error: str
+    sizes: Annotated[list[list[float]], msgspec.Meta(min_length=1)]
+
+
 class StudySpec(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     name: str = ""
     profiles: Annotated[list[str], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: ["sim"])
@@ -80,6 +90,7 @@ class StudySpec(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     none: bool = True
     effects: list[EffectSweep] = []
     pairs: list[EffectPair] = []
+    setup: list[SetupSweep] = []
 
 
 class Study(msgspec.Struct, frozen=True):
@@ -100,6 +111,7 @@ class Study(msgspec.Struct, frozen=True):
     none: bool
     sweeps: tuple[tuple[str, str, tuple[float, ...], float, str, tuple[tuple[str, float], ...]], ...]
     pairs: tuple[tuple[tuple[str, ...], tuple[tuple[str, float], ...]], ...]
+    setups: tuple[tuple[str, tuple[float, ...]], ...] = ()  # (SETUP_ERRORS name, values)
 
 
 def load_study(path: Path) -> Study:
@@ -142,10 +154,18 @@ def load_study(path: Path) -> Study:
                                 f"known: {', '.join(sorted(known))}")
             _check_bounds(known[name], value, source, f"{key}.values.{name}")
         pairs.append((specs, tuple(sorted(pair.values.items()))))
+    setups = []
+    for index, sweep in enumerate(spec.setup):
+        for number, size in enumerate(sweep.sizes):
+            try:
+                parse_setup_error(setup_error_text(sweep.error, tuple(size)))
+            except UserError as error:
+                raise UserError(f"{source}: setup[{index}].sizes[{number}]: {error}") from None
+            setups.append((sweep.error, tuple(size)))
     return Study(name=spec.name or path.stem, source=source, profiles=profiles,
                  orientations=tuple(spec.orientations), plans=plans, models=tuple(spec.models),
                  seeds=tuple(spec.seeds), noise_scales=tuple(spec.noise_scales), none=spec.none,
-                 sweeps=tuple(sweeps), pairs=tuple(pairs))
+                 sweeps=tuple(sweeps), pairs=tuple(pairs), setups=tuple(setups))
 
 
 def _relative(name: str, folder: Path, suffix: str = "") -> str:

@@ -10,8 +10,10 @@ from __future__ import annotations
 from .config import HANGING_BASE_ORIENTATION, JetResponse, SensorNoise, TwinConfig
 from ..profile import SensorMounting
 from .recording import TwinRecording
+from .setup_errors import SETUP_ERRORS, SetupErrors, parse_setup_error, setup_error_text
 from .twin import DEFAULT_SAMPLE_RATE_HZ, SENSORS, DigitalTwin, SensorMeasurement
 
 __all__ = ["DEFAULT_SAMPLE_RATE_HZ", "HANGING_BASE_ORIENTATION",
-           "SENSORS", "DigitalTwin", "JetResponse", "SensorMeasurement", "SensorMounting", "SensorNoise",
-           "TwinConfig", "TwinRecording"]
+           "SENSORS", "SETUP_ERRORS", "DigitalTwin", "JetResponse", "SensorMeasurement", "SensorMounting", "SensorNoise",
+           "SetupErrors", "TwinConfig", "TwinRecording", "parse_setup_error",
+           "setup_error_text"]

@@ -30,6 +30,7 @@ from ..errors import UserError
 from ..geometry import quat_normalize
 from ..params import JET_COUNT, ModelParameters, with_parameters
 from ..profile import RigProfile, SensorMounting
+from .setup_errors import SetupErrors
 
 _TWIN_DEFAULTS = TwinTable()
 # The default rig hangs the rod from its clamp with the tracker's z axis up: the base
@@ -154,6 +155,7 @@ class TwinConfig:
     max_force_n: full-scale jet force of the default linear valve response, N.
     jet_response: one `JetResponse` per jet, or None for linear 0..1000 -> 0..max_force_n.
     resolution: integration steps of the twin's Cosserat rod.
+    setup: `SetupErrors`, a rig wired or described wrongly (default: none).
     """
 
     true_params: ModelParameters = field(default_factory=ModelParameters)
@@ -171,6 +173,7 @@ class TwinConfig:
     max_force_n: float = DEFAULT_MAX_JET_FORCE_N
     jet_response: tuple[JetResponse, JetResponse, JetResponse] | None = None
     resolution: int = 20
+    setup: SetupErrors = field(default_factory=SetupErrors)
 
     def __post_init__(self) -> None:
         owner = "TwinConfig"
@@ -234,6 +237,8 @@ class TwinConfig:
         if isinstance(self.resolution, bool) or not isinstance(self.resolution, (int, np.integer)) \
                 or self.resolution < 1:
             raise ValueError(f"{owner}.resolution must be an integer >= 1, got {self.resolution!r}")
+        if not isinstance(self.setup, SetupErrors):
+            raise ValueError(f"{owner}.setup must be SetupErrors, got {type(self.setup).__name__}")
 
     @classmethod
     def from_profile(cls, profile: RigProfile, **changes: object) -> "TwinConfig":
@@ -254,6 +259,11 @@ class TwinConfig:
             hidden_effects = tuple(load_effect(_effect_spec(spec, profile)) for spec in table.hidden_effects)
         except UserError as error:
             raise UserError(f"{profile.source}: twin.hidden_effects: {error}") from None
+        try:
+            setup = SetupErrors(table.jet_wiring, table.tracker_tilt_deg, table.base_sensor_rotvec_rad)
+        except ValueError:
+            raise UserError(f"{profile.source}: twin.jet_wiring must be a permutation of 1, 2, 3, "
+                            f"got {list(table.jet_wiring)}") from None
         values: dict[str, object] = {
             "true_params": true_params,
             "gravity_in_tracker_m_s2": profile.gravity_in_tracker_m_s2,
@@ -268,6 +278,7 @@ class TwinConfig:
             "noise": table.noise,
             "seed": table.seed,
             "settle_time_constant_s": table.settle_time_constant_s,
+            "setup": setup,
         }
         values.update(changes)
         try:

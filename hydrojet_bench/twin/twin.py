@@ -25,6 +25,10 @@ Sensors. Truth (`sensor_truth`, `sensor_poses`) is exact; `measure_em` and `meas
 add the twin's seeded noise (`SensorNoise`). The Aurora emulator adds its own noise to
 `sensor_truth`, so a twin behind emulators is never noisy twice.
 
+Setup errors (`TwinConfig.setup`, see `setup_errors`): the twin's jets receive the commanded
+forces through the wiring permutation, its gravity is turned by the tracker tilt, and the
+base sensor's mounting gains the unknown rotation; recordings keep the commanded forces.
+
 A sensor's orientation in the tracker frame is R_base_pose R_body M_effect M_mount: the body frame
 (clamp at s = 0 or rod tip at s = L) in the tracker frame, then the mounting rotation a hidden
 effect may add (the `Solution`'s ``*_sensor_mounting``), then the rig's known mounting
@@ -126,6 +130,12 @@ class DigitalTwin:
         if cfg.gravity_in_tracker_m_s2 is not None:
             params = replace(params, gravity_in_base_m_s2=tuple(
                 self._base_rotation.T @ np.array(cfg.gravity_in_tracker_m_s2)))
+        if cfg.setup.tracker_tilt_deg != (0.0, 0.0):
+            # A tilted field generator turns gravity as the tracker sees it; the clamp's
+            # pose in the tracker frame is measured, so it stays.
+            gravity_in_tracker = self._base_rotation @ np.array(params.gravity_in_base_m_s2)
+            params = replace(params, gravity_in_base_m_s2=tuple(
+                self._base_rotation.T @ cfg.setup.tilt_rotation() @ gravity_in_tracker))
         if cfg.hidden_effect_values:
             params = with_parameters(params, dict(cfg.hidden_effect_values))
         # A fresh object even when nothing changed: models cache packed problems by the
@@ -134,8 +144,8 @@ class DigitalTwin:
         self.model = CosseratModel(effects=cfg.effects, resolution=cfg.resolution)
         self.gravity_in_tracker_m_s2 = self._base_rotation @ np.array(self.true_params.gravity_in_base_m_s2)
         self.magnetic_field_in_tracker_ut = np.array(cfg.magnetic_field_in_tracker_ut)
-        self._mount_rotation = np.stack([matrix_from_quat(cfg.base_sensor.rotation_in_body),
-                                         matrix_from_quat(cfg.tip_sensor.rotation_in_body)])
+        base_mounting = cfg.setup.base_mounting_rotation() @ matrix_from_quat(cfg.base_sensor.rotation_in_body)
+        self._mount_rotation = np.stack([base_mounting, matrix_from_quat(cfg.tip_sensor.rotation_in_body)])
         self._mount_offset_m = np.array([cfg.base_sensor.offset_in_body_m, cfg.tip_sensor.offset_in_body_m])
         self._tau_s = cfg.settle_time_constant_s
         self._responses = cfg.jet_responses
@@ -189,7 +199,8 @@ class DigitalTwin:
             if t < last.start_s:
                 raise ValueError(f"t_s {t} s precedes the last command at {last.start_s} s; "
                                  "commands must come in time order")
-            solution = self.model.solve(forces, self.true_params, previous=last.solution)
+            solution = self.model.solve(self.config.setup.physical_jet_forces_n(forces), self.true_params,
+                                        previous=last.solution)
             orientation, position = self._equilibrium_poses(solution)
             start_orientation, start_position = self._poses_in_segment(last, np.array([t]))
             rotation_offset = rotvec_from_quat(quat_multiply(quat_conjugate(orientation), start_orientation[:, 0]))

@@ -16,7 +16,7 @@ from hydrojet_bench.bench.live_view import LiveView
 from hydrojet_bench.bench.stream_rates import StreamRateFigure
 from hydrojet_bench.bench.session import SessionStatus
 from hydrojet_bench.logs import read_log
-from hydrojet_bench.logs.topics import Event, ValveCommand
+from hydrojet_bench.logs.topics import Event, Sample, SetupCheck, Step, ValveCommand
 from hydrojet_bench.plans import PlanStep
 
 
@@ -87,3 +87,49 @@ def test_live_view_renders_progress_errors_and_health():
                      "4000 frames, 3 incomplete", "sensor not tracked", "ETA 00:24",
                      "effect [bold]my[/x].py:Twist", "em 39.8/40 Hz", "imu 80.0/100 Hz"):
         assert expected in text, (expected, text)
+
+
+def test_a_miswired_rig_stops_before_the_protocol_with_one_line(tmp_path):
+    profile = tmp_path / "swapped.toml"
+    profile.write_text((Path(__file__).parents[2] / "profiles" / "sim.toml").read_text()
+                       + "\n[twin]\njet_wiring = [1, 3, 2]\n")
+    log_path = tmp_path / "swapped.mcap"
+    done = subprocess.run([sys.executable, "-m", "hydrojet_bench.cli", "run", "--profile", str(profile), "--plan",
+                           "calibration:2", "--no-live", "--time-scale", "5", "--log", str(log_path)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "Traceback" not in done.stderr
+    assert "jets 2 and 3 appear swapped: tip moved towards jet 3's side when jet 2 fired" in done.stderr
+    contents = read_log(log_path)
+    checks = {m.check: m.status for m in contents.on(SetupCheck)}
+    assert checks["wiring"] == "fail" and checks["level"] == "pass"
+    # No protocol data taken: no step, and no sample logged while a check fired a jet.
+    assert not contents.on(Step)
+    fired = [m.t_s for m in contents.on(ValveCommand) if max(m.jet_forces_n) > 0]
+    assert len(fired) == 3
+    assert not [m for m in contents.on(Sample) if fired[0] <= m.t_s <= fired[-1]]
+
+
+def test_skipping_the_checks_is_logged(tmp_path):
+    log_path = tmp_path / "skipped.mcap"
+    done = subprocess.run([sys.executable, "-m", "hydrojet_bench.cli", "run", "--plan", "calibration:1", "--no-live",
+                           "--time-scale", "5", "--skip-checks", "--no-calibration", "--log", str(log_path)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert {m.check: m.status for m in read_log(log_path).on(SetupCheck)} == {"wiring": "skipped",
+                                                                               "level": "skipped"}
+
+
+def test_a_tilted_field_generator_warns_with_both_gravity_vectors(tmp_path):
+    profile = tmp_path / "tilted.toml"
+    profile.write_text((Path(__file__).parents[2] / "profiles" / "sim.toml").read_text()
+                       + "\n[twin]\ntracker_tilt_deg = [3.0, 0.0]\n")
+    log_path = tmp_path / "tilted.mcap"
+    done = subprocess.run([sys.executable, "-m", "hydrojet_bench.cli", "run", "--profile", str(profile), "--plan",
+                           "calibration:1", "--no-live", "--no-calibration", "--time-scale", "5", "--log",
+                           str(log_path)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    printed = " ".join(done.stdout.split())
+    assert "warning: level check: gravity differs by" in printed and "base IMU gravity [" in printed
+    (level,) = [m for m in read_log(log_path).on(SetupCheck) if m.check == "level"]
+    assert level.status == "warn" and abs(level.values["angle_deg"] - 3.0) < 0.2

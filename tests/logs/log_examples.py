@@ -11,7 +11,7 @@ from mcap.reader import make_reader
 
 from hydrojet_bench.logs import TOPICS, LogRecord, LogWriter, floats
 from hydrojet_bench.logs.topics import (Disturbance, EmFrame, EmTool, Event, ImuOrientation, ImuRaw, ModelPrediction,
-                                        Parameters, Sample, Step, StreamRate, ValveCommand, ValveReply)
+                                        Parameters, Sample, SetupCheck, Step, StreamRate, ValveCommand, ValveReply)
 
 START_TIME_UNIX_S = 1_700_000_000.25
 METADATA = {"bench": {"profile_name": "sim", "software_version": "test"}, "operator": {"name": "A. N. Other"}}
@@ -45,11 +45,13 @@ EXAMPLES: dict[str, LogRecord] = {record.topic: record for record in (
     Event(t_s=0.0, level="warning", source="tracker", message="sensor not tracked: tip MISSING"),
     StreamRate(t_s=0.0, stream="imu", configured_hz=100.0, delivered_hz=97.5, samples=195, interval_s=2.0,
                whole_session=False),
+    SetupCheck(t_s=0.0, check="wiring", status="fail", message="jets 2 and 3 appear swapped",
+               values={"cable2_drives_jet": 3.0}),
 )}
 # The two Foxglove topics are written by their own methods.
 FOXGLOVE_TOPICS = ("/tf", "/scene/backbone")
 # Topics added since tests/logs/data/format1_all_topics.mcap was written.
-ADDED_AFTER_FORMAT_1 = ("/bench/stream_rate",)
+ADDED_AFTER_FORMAT_1 = ("/bench/stream_rate", "/bench/setup_check")
 # The topics in the order `write_all_topics` writes them.
 WRITE_ORDER = ([topic for topic in EXAMPLES if topic not in ADDED_AFTER_FORMAT_1] + list(FOXGLOVE_TOPICS)
                + list(ADDED_AFTER_FORMAT_1))

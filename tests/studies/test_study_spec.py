@@ -28,6 +28,9 @@ from hydrojet_bench.studies.spec import load_study
     ('orientations = ["upside-down"]\n', "orientations[0]"),
     ('[[pairs]]\neffects = ["jet_gain", "base_compliance"]\nvalues = {"jet_gain.gain_1" = 9.0}\n',
      "pairs[0].values.jet_gain.gain_1: 9.0 is outside"),
+    ('[[setup]]\nerror = "jet_wiring"\nsizes = [[1, 1, 2]]\n',
+     "setup[0].sizes[0]: setup error 'jet_wiring=1,1,2': SetupErrors.jet_wiring must be a permutation"),
+    ('[[setup]]\nerror = "tracker_tilt"\nsizes = [[1.0, 2.0]]\n', "setup[0].sizes[0]: setup error 'tracker_tilt=1,2'"),
     ('[[pairs]]\neffects = ["jet_gain"]\n', "pairs[0].effects"),
 ])
 def test_spec_mistakes_name_file_and_key(tmp_path: Path, body: str, message: str):
@@ -62,3 +65,15 @@ def test_cell_ids_are_stable_and_distinct(tmp_path: Path):
     assert {cell.truth for cell in first} == {"none", "jet_gain", "boom"}
     reordered = write_spec(tmp_path, TINY.replace("seeds = [0, 1]", "seeds = [1, 0]"), "reordered.toml")
     assert {cell.id for cell in expand(load_study(reordered))} == {cell.id for cell in first if cell.truth != "boom"}
+
+
+def test_the_setup_study_has_every_setup_error_and_the_hypothesis_it_should_name():
+    from hydrojet_bench.studies.cell import expected_verdict
+
+    study = load_study(Path(__file__).resolve().parents[2] / "docs/studies/setup.toml")
+    cells = expand(study)
+    assert len(cells) == 54 and len({cell.id for cell in cells}) == 54
+    expected = {(cell.scenario, expected_verdict(cell)) for cell in cells if cell.kind == "setup"}
+    assert ("jet_wiring=1,3,2", "jet_wiring_132") in expected and ("jet_wiring=2,3,1", "jet_wiring_231") in expected
+    assert ("tracker_tilt_deg=6,-3", "tracker_tilt") in expected
+    assert ("base_sensor_rotvec=0,0,0.1", "base_sensor_mounting") in expected

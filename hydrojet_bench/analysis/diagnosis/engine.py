@@ -29,9 +29,10 @@
    remaining candidates are tried on top of it, up to ``depth`` effects in all; each
    found effect carries its share of the first baseline's excess squared error.
 
-A setup stage (issue 17: a swapped cable, a sensor on the wrong side) belongs before
-the physics: ``DiagnosisSettings.setup`` gets the problem and the calibrated baseline
-and returns effects that join the baseline before any candidate is tried.
+7. Setup before physics (`setup`): in the first stage the setup hypotheses (a wrong
+   jet wiring, a tilted tracker, a turned base sensor) are fitted beside the physical
+   candidates, moved to their own ranking, and decided first (`setup.with_setup_stage`).
+   A setup winner joins the baseline like a physical one for the later stages.
 
 Score: BIC on the TRAINING residuals with the noise scale fixed at the measured floor,
 chi^2 + k ln(n) (chi^2 = training sum of squares / sigma^2, k fitted parameters, n
@@ -53,7 +54,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Protocol
 
 import numpy as np
 from scipy.stats import f as f_distribution
@@ -71,18 +71,12 @@ from .evidence import (NOISE_GAP_PER_FLOOR, OnlineEvidence, cosine, hysteresis_g
 from .fitting import Fit, Problem, fit, fit_candidates, session_gravity
 from .noise import NoiseFloor, estimate_noise_floor
 from .separate import SeparatingPose, separating_poses
+from .setup import SETUP_PREFERENCE_SCORE, SetupFix, fit_wirings, hypotheses, with_setup_stage
 from .split import Split, split_session
 
 NONE, UNEXPLAINED = "none", "unexplained"
 DEFAULT_DEPTH = 3
 AT_BOUND_NOTE = "at its bound: may be larger"
-
-
-class SetupStage(Protocol):
-    """Setup hypotheses tried before the physics: given the fit problem and the
-    calibrated baseline, the effects (setup errors) to add to the baseline."""
-
-    def __call__(self, problem: Problem, baseline: Fit) -> tuple[Effect, ...]: ...
 
 
 @dataclass(frozen=True)
@@ -91,7 +85,7 @@ class DiagnosisSettings:
     the excess squared held-out error a winner must remove. workers: processes for the
     candidate fits (None: up to 2). online: the estimator used for the evidence.
     window_s: averaging window of the steps (for the within-window noise estimate).
-    depth: most effects named in one diagnosis. setup: the setup stage, if any."""
+    depth: most effects named in one diagnosis."""
 
     significance: float = 0.01
     min_explained_fraction: float = 0.5
@@ -99,7 +93,6 @@ class DiagnosisSettings:
     online: OnlineSettings = field(default_factory=OnlineSettings)
     window_s: float = 1.0
     depth: int = DEFAULT_DEPTH
-    setup: SetupStage | None = None
 
 
 @dataclass(frozen=True)
@@ -220,6 +213,11 @@ class Diagnosis:
     found: tuple[FoundEffect, ...] = ()
     separating_poses: tuple[SeparatingPose, ...] = ()
     candidate_fits: dict[str, Fit] = field(default_factory=dict)
+    # The setup stage (`setup`): its hypotheses' results, what kind of verdict this is
+    # (setup | physics | none | unexplained) and, for a setup verdict, what to change.
+    setup_ranking: tuple[CandidateResult, ...] = ()
+    verdict_kind: str = ""
+    setup_fix: SetupFix | None = None
 
     @property
     def winner_fit(self) -> Fit | None:
@@ -236,11 +234,14 @@ class Diagnosis:
 
     @property
     def winner(self) -> CandidateResult | None:
-        return next((c for c in self.ranking if c.effect == self.verdict), None)
+        return next((c for c in self.ranking + self.setup_ranking if c.effect == self.verdict), None)
 
     def as_dict(self) -> dict:
         return {
             "verdict": self.verdict,
+            "verdict_kind": self.verdict_kind,
+            "setup": {"fix": None if self.setup_fix is None else self.setup_fix.as_dict(),
+                      "ranking": [candidate.as_dict() for candidate in self.setup_ranking]},
             "explanation": self.explanation,
             "noise_floor_deg": self.noise_floor_deg,
             "baseline": {
@@ -326,17 +327,16 @@ def diagnose(steps: Dataset, model_name: str = "cosserat", known_effects: Sequen
         position_weight_rad_per_m=0.0 if not position_sigma else noise.orientation_axis_rad / position_sigma)
     baseline = fit(problem)
     say(f"baseline calibrated ({baseline.convergence})")
-    if settings.setup is not None:
-        found_setup = settings.setup(problem, baseline)
-        if found_setup:
-            known = known + tuple(found_setup)
-            problem = _with_known(problem, found_setup)
-            baseline = fit(problem, start=baseline.params)
-    first = _stage(problem, known, noise, baseline, candidates, settings, started, say)
+    # Setup hypotheses are fitted beside the physics in the first stage and decided first.
+    wirings, setups = hypotheses(problem, baseline)
+    first = with_setup_stage(_stage(problem, known, noise, baseline, setups + candidates, settings, started, say,
+                                    fitted_first=(wirings, fit_wirings(problem, wirings))),
+                             steps, SETUP_PREFERENCE_SCORE)
+    tried = wirings + setups + candidates
     stages, current = [], first
     while (current.verdict not in (NONE, UNEXPLAINED) and current.remaining_excess
            and len(stages) + 1 < settings.depth):
-        winner = next(c for c in candidates if c.name == current.verdict)
+        winner = next(c for c in tried if c.name == current.verdict)
         added = at_physical_limits(winner) if current.winner.widened else winner
         remaining = tuple(c for c in candidates if c.name != winner.name
                           and all(c.name != name for name in (current.known_effects + (winner.name,))))
@@ -360,13 +360,14 @@ def _with_known(problem: Problem, effects: Sequence[Effect]) -> Problem:
 
 def _stage(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseline: Fit,
            candidates: Sequence[Effect], settings: DiagnosisSettings, started: float,
-           say: Callable[[str], None]) -> Diagnosis:
-    """One round: every candidate on top of ``baseline``, and the decision."""
-    fits = fit_candidates(problem, candidates, baseline, settings.workers,
-                          progress=lambda done: say(f"fitted {done.effect} ({done.convergence})"))
+           say: Callable[[str], None], fitted_first: tuple[Sequence[Effect], Sequence[Fit]] = ((), ())) -> Diagnosis:
+    """One round: every candidate on top of ``baseline``, and the decision.
+    fitted_first: candidates already fitted another way (the wirings), with their fits."""
+    fits = list(fitted_first[1]) + fit_candidates(problem, candidates, baseline, settings.workers,
+                                                  progress=lambda done: say(f"fitted {done.effect} ({done.convergence})"))
     online = online_evidence(problem.model(), baseline.params, problem.steps, problem.split.held_out,
                              problem.gravity_in_base_m_s2, settings.online)
-    return _decide(problem, known, noise, baseline, candidates, fits, online, settings, started)
+    return _decide(problem, known, noise, baseline, (*fitted_first[0], *candidates), fits, online, settings, started)
 
 
 def _found(first: Diagnosis, stages: Sequence[Diagnosis]) -> tuple[FoundEffect, ...]:

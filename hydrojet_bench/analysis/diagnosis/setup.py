@@ -1,0 +1,188 @@
+"""The setup stage of `diagnose`: is the rig wired or described wrongly?
+
+The hypotheses (`effects.setup`: five wrong jet wirings, a tracker tilt, a base sensor
+mounting; a wiring only when it beats the stated one at the baseline, see `hypotheses`) are fitted and scored exactly as the physical candidates, then taken out of
+the physics ranking into their own. They are tried first: a setup hypothesis that
+qualifies takes the verdict unless a physical candidate scores better by more than
+`SETUP_PREFERENCE_SCORE`; physical candidates within that of it are listed as
+alternatives (and the other way round), with what tells them apart.
+
+A setup verdict says what to change: the profile key and its corrected value (written
+by ``diagnose --export-profile``), or which valve cables to swap.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ...data.dataset import Dataset
+from ...effects.setup import BaseSensorMounting, JetWiring, TrackerTilt, setup_effects, tilt_rotation
+from ...errors import ConvergenceError
+from ...geometry import matrix_from_quat, quat_from_matrix, quat_multiply, so3_exp
+from .fitting import Fit, Problem, fit, predict_path, training_chi2
+
+SETUP, PHYSICS = "setup", "physics"
+# BIC margin within which a setup error wins over a physical effect that explains the
+# data as well: check the rig description before hunting for missing physics.
+SETUP_PREFERENCE_SCORE = 10.0
+# What separates a setup error from the physics it ties with: shown beside the tie.
+SEPARATING_MEASUREMENT = {
+    "tracker_tilt": "hold the jets off and compare the base IMU's gravity with the profile's (run's level check)",
+    "base_sensor_mounting": "turn the clamp a known angle about the rod axis: a base sensor error turns the "
+                            "reading with it, a jet ring error does not",
+    "jet_wiring": "fire each jet alone and watch which side the tip moves to (run's wiring check)",
+}
+
+
+@dataclass(frozen=True)
+class SetupFix:
+    """What to change for a setup verdict. profile_key/corrected_value: the TOML key
+    (``table.key``) and its new value (None when the fix is a cable, not the profile).
+    action: one line for the user."""
+
+    hypothesis: str
+    action: str
+    profile_key: str | None = None
+    corrected_value: tuple[float, ...] | None = None
+
+    def as_dict(self) -> dict:
+        return {"hypothesis": self.hypothesis, "action": self.action, "profile_key": self.profile_key,
+                "corrected_value": None if self.corrected_value is None else list(self.corrected_value)}
+
+
+def hypotheses(problem: Problem, baseline: Fit) -> tuple[tuple, tuple]:
+    """The setup hypotheses worth a fit, as (wirings, others): the tilt and the base
+    mounting always; a wrong wiring only when, at the initial (profile) parameters, it
+    fits the training steps better than the calibrated baseline does (a wrong permutation
+    of a correctly wired rig is tens of degrees off, and five fits of it would double
+    diagnose's time)."""
+    wirings, others = [], []
+    for effect in setup_effects():
+        if not isinstance(effect, JetWiring):
+            others.append(effect)
+            continue
+        try:
+            predictions, positions = predict_path(problem.model(effect), problem.initial, problem.steps,
+                                                  problem.gravity_in_base_m_s2)
+        except (ConvergenceError, ValueError):
+            continue
+        if training_chi2(problem, predictions, positions)[0] < baseline.training_chi2:
+            wirings.append(effect)
+    return tuple(wirings), tuple(others)
+
+
+def fit_wirings(problem: Problem, wirings: tuple) -> list[Fit]:
+    """Fit each wiring from the initial parameters: the baseline's optimum on miswired
+    data is a rod bent to fit the wrong jets, a bad start (solves fail from there)."""
+    return [fit(problem, wiring, start=problem.initial) for wiring in wirings]
+
+
+def is_setup(name: str) -> bool:
+    return name in {effect.name for effect in setup_effects()}
+
+
+def wiring_action(wiring: tuple[int, ...]) -> str:
+    wrong = [(i + 1, j) for i, j in enumerate(wiring) if j != i + 1]
+    if len(wrong) == 2:
+        return f"swap the valve cables of jets {wrong[0][0]} and {wrong[1][0]}"
+    moves = ", ".join(f"the cable on jet {j} to jet {i}" for i, j in wrong)
+    return f"the jets are wired one position round: move {moves}"
+
+
+def setup_fix(name: str, parameters: dict[str, tuple[float, float]], steps: Dataset) -> SetupFix:
+    """The fix a fitted setup hypothesis names (parameters: qualified name -> (value, se))."""
+    values = {key.partition(".")[2]: value for key, (value, _) in parameters.items()}
+    profile = steps.profile
+    if name.startswith("jet_wiring_"):
+        wiring = tuple(int(c) for c in name.removeprefix("jet_wiring_"))
+        return SetupFix(name, wiring_action(wiring))
+    if name == TrackerTilt.name:
+        gravity_in_base = steps.gravity_in_base_m_s2().mean(axis=0)
+        turned = tilt_rotation(gravity_in_base, values["about_u_rad"], values["about_v_rad"]) @ gravity_in_base
+        # The base is static in a session diagnose can split (see fitting.session_gravity).
+        clamps = profile.clamp_orientation_in_tracker(steps.base_orientation)
+        clamp_q = (clamps * np.sign(clamps @ clamps[0])[:, None]).mean(axis=0)  # q and -q are one rotation
+        clamp = matrix_from_quat(clamp_q / np.linalg.norm(clamp_q))
+        corrected = tuple(round(float(v), 4) for v in clamp @ turned)
+        angle = float(np.degrees(np.hypot(values["about_u_rad"], values["about_v_rad"])))
+        return SetupFix(name, f"gravity in the tracker frame is {angle:.1f} deg off the profile's: level the field "
+                              f"generator, or set gravity.in_tracker_m_s2 = {list(corrected)}",
+                        "gravity.in_tracker_m_s2", corrected)
+    if name == BaseSensorMounting.name:
+        rotation = so3_exp([values["rx_rad"], values["ry_rad"], values["rz_rad"]])
+        corrected_q = quat_multiply(quat_from_matrix(rotation), np.asarray(profile.base_sensor.rotation_in_body))
+        corrected = tuple(round(float(v), 6) for v in corrected_q * np.sign(corrected_q[0] or 1.0))
+        angle = float(np.degrees(np.linalg.norm([values["rx_rad"], values["ry_rad"], values["rz_rad"]])))
+        return SetupFix(name, f"the base sensor sits {angle:.1f} deg turned in the clamp: set "
+                              f"base_sensor.rotation_in_base = {list(corrected)}", "base_sensor.rotation_in_base", corrected)
+    raise ValueError(f"{name!r} is no setup hypothesis")
+
+
+def setup_hypothesis(errors) -> str:
+    """The hypothesis a perfect diagnosis names for a twin's `SetupErrors` with one error."""
+    if errors.jet_wiring != (1, 2, 3):
+        return "jet_wiring_" + "".join(str(j) for j in errors.jet_wiring)
+    if errors.tracker_tilt_deg != (0.0, 0.0):
+        return TrackerTilt.name
+    return BaseSensorMounting.name
+
+
+def separating_measurement(name: str) -> str:
+    return SEPARATING_MEASUREMENT["jet_wiring" if name.startswith("jet_wiring_") else name]
+
+
+def with_setup_stage(diagnosis, steps: Dataset, ambiguity_score: float):
+    """``diagnosis`` (ranked over physics and setup hypotheses together) with the setup
+    hypotheses moved to ``setup_ranking`` and the verdict decided setup first."""
+    setup_ranking = tuple(c for c in diagnosis.ranking if is_setup(c.effect))
+    physics = tuple(c for c in diagnosis.ranking if not is_setup(c.effect))
+    if diagnosis.verdict in ("none", "unexplained"):
+        kind = "none" if diagnosis.verdict == "none" else "unexplained"
+        return replace(diagnosis, ranking=physics, setup_ranking=setup_ranking, verdict_kind=kind)
+    qualifying = sorted((c for c in diagnosis.ranking if c.qualifies), key=lambda c: c.score)
+    best_setup = next((c for c in qualifying if is_setup(c.effect)), None)
+    best_physics = next((c for c in qualifying if not is_setup(c.effect)), None)
+    if best_setup is not None and (best_physics is None or best_setup.score - best_physics.score < ambiguity_score):
+        winner, kind = best_setup, SETUP
+    else:
+        winner, kind = best_physics, PHYSICS
+    alternatives = tuple(c.effect for c in qualifying if c is not winner and c.score - winner.score < ambiguity_score)
+    fix = setup_fix(winner.effect, winner.parameters, steps) if kind == SETUP else None
+    explanation = winner.explanation
+    if fix is not None:
+        explanation += f"\nFix: {fix.action}."
+        tied = [name for name in alternatives if not is_setup(name)]
+        if tied:
+            explanation += (f"\n{', '.join(tied)} explains the data as well; to tell them apart: "
+                            f"{separating_measurement(winner.effect)}.")
+    remaining = winner.heldout_orientation_rmse_deg > diagnosis.at_floor_threshold_deg
+    return replace(diagnosis, verdict=winner.effect, explanation=explanation, ranking=physics,
+                   setup_ranking=setup_ranking, alternatives=alternatives, remaining_excess=remaining,
+                   verdict_kind=kind, setup_fix=fix)
+
+
+__all__ = ["PHYSICS", "SETUP", "SETUP_PREFERENCE_SCORE", "SetupFix", "corrected_profile_text", "fit_wirings", "hypotheses", "is_setup", "setup_fix", "setup_hypothesis", "with_setup_stage"]
+
+
+def corrected_profile_text(text: str, fix: SetupFix) -> str:
+    """The profile's TOML text with the fix's key set to its corrected value (the line
+    replaced in its table, else added to the table, else the table appended)."""
+    if fix.profile_key is None or fix.corrected_value is None:
+        raise ValueError(f"{fix.hypothesis}: the fix is at the rig, not in the profile")
+    table, _, key = fix.profile_key.partition(".")
+    line = f"{key} = [{', '.join(repr(float(v)) for v in fix.corrected_value)}]  # corrected by diagnose"
+    lines = text.splitlines()
+    header = next((i for i, row in enumerate(lines) if row.strip() == f"[{table}]"), None)
+    if header is None:
+        return text.rstrip("\n") + f"\n\n[{table}]\n{line}\n"
+    end = next((i for i in range(header + 1, len(lines)) if lines[i].lstrip().startswith("[")), len(lines))
+    for i in range(header + 1, end):
+        if re.match(rf"\s*{re.escape(key)}\s*=", lines[i]):
+            lines[i] = line
+            break
+    else:
+        lines.insert(header + 1, line)
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,134 @@
+"""Setup errors as effects: a rig wired or described wrongly, written so a model can fit them.
+
+They are not physics and not in the library: `analysis.diagnosis.setup` tries them
+before any physical effect, and a fit of one says which profile key or cable to change.
+Each default leaves the model unchanged, like a library effect's.
+
+* `JetWiring`: one of the five wrong permutations of the valve cables (no parameter).
+* `TrackerTilt`: gravity turned by two angles about axes perpendicular to it (a field
+  generator that is not level, or a wrong ``[gravity]``).
+* `BaseSensorMounting`: the base sensor turned in the clamp by a rotation vector; it turns
+  the frame every measurement is expressed in, gravity included.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+from ..geometry import so3_exp
+from .base import EffectParameter
+
+if TYPE_CHECKING:
+    from .problem import RodProblem
+
+# Wider than any library effect: a setup error is not small by nature (a clamp put on a
+# quarter turn off, a field generator on a ramp). Past 0.8 rad (46 degrees) a
+# rotation is no longer an error of mounting but another rig.
+_ROTATION_LIMIT_RAD = 0.8
+
+
+def rotate_gravity_load(problem: RodProblem, rotation: np.ndarray) -> None:
+    """Turn the weight of rod and capsule from the parameters' gravity g to ``rotation @ g``
+    by adding the difference (the gravity effect has added m g already)."""
+    params = problem.params
+    gravity = np.asarray(params.gravity_in_base_m_s2)
+    change = rotation @ gravity - gravity
+    problem.distributed_force_in_base_n_m = (problem.distributed_force_in_base_n_m
+                                             + params.rod.mass_per_length_kg_m * change)
+    if params.capsule.mass_kg > 0.0:
+        problem.add_tip_dead_force(params.capsule.mass_kg * change, np.asarray(params.capsule.center_of_mass_in_tip_m))
+
+
+def tilt_axes(gravity_in_base_m_s2: np.ndarray) -> np.ndarray:
+    """(2, 3) unit axes perpendicular to gravity (base frame) that `TrackerTilt` turns it
+    about: the first also perpendicular to the base x axis (or y, if gravity is along x)."""
+    down = np.asarray(gravity_in_base_m_s2, dtype=float)
+    down = down / np.linalg.norm(down)
+    reference = np.array([1.0, 0.0, 0.0]) if abs(down[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    first = np.cross(down, reference)
+    first /= np.linalg.norm(first)
+    return np.array([first, np.cross(down, first)])
+
+
+def tilt_rotation(gravity_in_base_m_s2: np.ndarray, about_u_rad: float, about_v_rad: float) -> np.ndarray:
+    """The rotation `TrackerTilt` applies to gravity (base frame)."""
+    return so3_exp(np.array([about_u_rad, about_v_rad]) @ tilt_axes(gravity_in_base_m_s2))
+
+
+class TrackerTilt:
+    name: ClassVar[str] = "tracker_tilt"
+    explanation: ClassVar[str] = (
+        "Gravity in the tracker frame is not the profile's: the EM field generator stands "
+        "tilted, or the profile's gravity.in_tracker_m_s2 is wrong. The weight then pulls the rod "
+        "sideways to where the model expects, by the same amount whatever the jets do, "
+        "most where the rod bends across gravity."
+    )
+    parameters: ClassVar[tuple[EffectParameter, ...]] = tuple(
+        EffectParameter(f"about_{axis}_rad", 0.0, -_ROTATION_LIMIT_RAD, _ROTATION_LIMIT_RAD, "rad",
+                        f"turn of gravity about the {label} axis perpendicular to it (see effects.setup.tilt_axes)")
+        for axis, label in (("u", "first"), ("v", "second"))
+    )
+    uses_actuation: ClassVar[bool] = False
+
+    def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
+        rotate_gravity_load(problem, tilt_rotation(problem.params.gravity_in_base_m_s2, values["about_u_rad"],
+                                                   values["about_v_rad"]))
+
+
+class BaseSensorMounting:
+    """The measured clamp frame is the true one turned by exp(r): the tip orientation in
+    the base frame reads exp(r)^T R_tip and gravity from the base pose reads exp(r)^T g."""
+
+    name: ClassVar[str] = "base_sensor_mounting"
+    explanation: ClassVar[str] = (
+        "The base sensor sits in the clamp turned by a rotation (rx, ry, rz, clamp frame) "
+        "that the profile's base_sensor.rotation_in_base does not state. Every tip pose is then read "
+        "in a turned frame, and gravity carried through the base pose is turned alike: "
+        "about the rod axis it looks like a turned jet ring (jet_misalignment), across it "
+        "like a tilted tracker plus a tip-sensor mounting."
+    )
+    parameters: ClassVar[tuple[EffectParameter, ...]] = tuple(
+        EffectParameter(f"r{axis}_rad", 0.0, -_ROTATION_LIMIT_RAD, _ROTATION_LIMIT_RAD, "rad",
+                        f"{axis} component of the base sensor's unknown rotation vector, clamp frame")
+        for axis in "xyz"
+    )
+    uses_actuation: ClassVar[bool] = False
+
+    def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
+        rotation = so3_exp([values["rx_rad"], values["ry_rad"], values["rz_rad"]])
+        rotate_gravity_load(problem, rotation)
+        problem.base_sensor_mounting = problem.base_sensor_mounting @ rotation
+
+
+class JetWiring:
+    """The valve cable of commanded jet i drives physical jet ``wiring[i]`` (1-based)."""
+
+    explanation: ClassVar[str] = (
+        "The valve cables are not on the jets the profile says: a command for one jet "
+        "fires another. Each jet's bend then points towards another jet's side (120 "
+        "degrees off), which no physical effect within its limits can mimic."
+    )
+    parameters: ClassVar[tuple[EffectParameter, ...]] = ()
+    uses_actuation: ClassVar[bool] = True
+
+    def __init__(self, wiring: tuple[int, int, int]) -> None:
+        self.wiring = tuple(wiring)
+        self.name = "jet_wiring_" + "".join(str(j) for j in self.wiring)
+
+    def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
+        physical = np.empty(3)
+        physical[np.array(self.wiring) - 1] = problem.jet_forces_n
+        problem.jet_forces_n = physical
+
+
+WRONG_WIRINGS: tuple[tuple[int, int, int], ...] = tuple(
+    w for w in itertools.permutations((1, 2, 3)) if w != (1, 2, 3))  # type: ignore[misc]
+
+
+def setup_effects() -> tuple[object, ...]:
+    """Every setup hypothesis: the five wrong wirings, the tracker tilt, the base mounting."""
+    return tuple(JetWiring(w) for w in WRONG_WIRINGS) + (TrackerTilt(), BaseSensorMounting())

@@ -1,0 +1,104 @@
+"""Setup errors a twin can simulate: a rig wired or described wrongly, physics nominal.
+
+`SetupErrors` is one frozen struct of the mistakes a careful experimenter lists first:
+
+* ``jet_wiring``: the valve cable of commanded jet i drives physical jet
+  ``jet_wiring[i]`` (1-based), so (1, 2, 3) is correct, (2, 1, 3) has the cables of
+  jets 1 and 2 swapped, (2, 3, 1) is wired one position round;
+* ``tracker_tilt_deg``: the EM field generator is not level: true gravity in the tracker
+  frame is the profile's turned about the tracker's x axis, then its y axis, by these
+  angles (degrees);
+* ``base_sensor_rotvec_rad``: the base sensor sits in the clamp turned by this rotation
+  vector (rad, clamp frame) on top of the mounting the profile states.
+
+`SETUP_ERRORS` maps the names ``simulate --hidden NAME=VALUE`` accepts to the field each
+sets, and `parse_setup_error` reads one such value (a user mistake is a `UserError`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from ..errors import UserError
+from ..geometry import so3_exp
+from ..params import JET_COUNT
+
+CORRECT_WIRING = (1, 2, 3)
+
+
+@dataclass(frozen=True)
+class SetupErrors:
+    """See the module docstring; the defaults are a correctly set-up rig."""
+
+    jet_wiring: tuple[int, int, int] = CORRECT_WIRING
+    tracker_tilt_deg: tuple[float, float] = (0.0, 0.0)
+    base_sensor_rotvec_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        wiring = tuple(self.jet_wiring)
+        if sorted(wiring) != list(CORRECT_WIRING) or any(isinstance(j, bool) for j in wiring):
+            raise ValueError(f"SetupErrors.jet_wiring must be a permutation of 1, 2, 3, got {self.jet_wiring!r}")
+        object.__setattr__(self, "jet_wiring", tuple(int(j) for j in wiring))
+        for name, size in (("tracker_tilt_deg", 2), ("base_sensor_rotvec_rad", 3)):
+            values = tuple(float(v) for v in getattr(self, name))
+            if len(values) != size or not all(math.isfinite(v) for v in values):
+                raise ValueError(f"SetupErrors.{name} must be {size} finite numbers, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, values)
+
+    @property
+    def any(self) -> bool:
+        return self != SetupErrors()
+
+    def physical_jet_forces_n(self, commanded_n: np.ndarray) -> np.ndarray:
+        """The forces (N) the physical jets 1..3 produce for forces commanded per cable."""
+        physical = np.empty(JET_COUNT)
+        physical[np.array(self.jet_wiring) - 1] = commanded_n
+        return physical
+
+    def tilt_rotation(self) -> np.ndarray:
+        """True gravity in the tracker frame = this matrix @ the profile's."""
+        about_x, about_y = np.radians(self.tracker_tilt_deg)
+        return so3_exp([0.0, about_y, 0.0]) @ so3_exp([about_x, 0.0, 0.0])
+
+    def base_mounting_rotation(self) -> np.ndarray:
+        """The base sensor's unknown extra rotation, clamp frame (applied before the
+        profile's stated mounting)."""
+        return so3_exp(self.base_sensor_rotvec_rad)
+
+
+# simulate --hidden NAME=VALUE: NAME -> (field, number of comma-separated values).
+SETUP_ERRORS: dict[str, tuple[str, int]] = {
+    "jet_wiring": ("jet_wiring", JET_COUNT),
+    "tracker_tilt_deg": ("tracker_tilt_deg", 2),
+    "base_sensor_rotvec": ("base_sensor_rotvec_rad", 3),
+}
+
+
+def setup_error_text(name: str, values: tuple[float, ...]) -> str:
+    """``name=v1,v2,...``: how `parse_setup_error` (and ``simulate --hidden``) takes it."""
+    return f"{name}=" + ",".join(f"{v:g}" for v in values)
+
+
+def parse_setup_error(text: str, errors: SetupErrors = SetupErrors()) -> SetupErrors:
+    """``errors`` with one ``NAME=v1,v2,...`` applied (NAME from `SETUP_ERRORS`)."""
+    name, equals, values = text.partition("=")
+    if not equals or name not in SETUP_ERRORS:
+        raise UserError(f"setup error {text!r}: a setup error is NAME=VALUES with NAME one of {', '.join(SETUP_ERRORS)}")
+    field_name, size = SETUP_ERRORS[name]
+    try:
+        numbers = tuple(float(v) for v in values.split(","))
+    except ValueError:
+        raise UserError(f"setup error {text!r}: {name} takes {size} comma-separated numbers") from None
+    if len(numbers) != size:
+        raise UserError(f"setup error {text!r}: {name} takes {size} comma-separated numbers, got {len(numbers)}")
+    if field_name == "jet_wiring":
+        numbers = tuple(int(v) for v in numbers)  # type: ignore[assignment]
+    changes = {f.name: getattr(errors, f.name) for f in fields(SetupErrors)}
+    changes[field_name] = numbers
+    try:
+        return SetupErrors(**changes)  # type: ignore[arg-type]
+    except ValueError as error:
+        raise UserError(f"setup error {text!r}: {error}") from None

@@ -1,0 +1,115 @@
+"""The setup stage of diagnose: its hypotheses model what the twin's setup errors do,
+its verdict puts setup first with ties listed, and its fix lands in the profile."""
+
+from __future__ import annotations
+
+from dataclasses import make_dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hydrojet_bench.analysis.diagnosis.engine import CandidateResult
+from hydrojet_bench.analysis.diagnosis.setup import SetupFix, corrected_profile_text, with_setup_stage
+from hydrojet_bench.effects import load_effect
+from hydrojet_bench.effects.setup import BaseSensorMounting, JetWiring, TrackerTilt, tilt_rotation
+from hydrojet_bench.geometry import rotation_angle_deg
+from hydrojet_bench.models import make_model
+from hydrojet_bench.params import with_parameters
+from hydrojet_bench.plans import calibration_plan
+from hydrojet_bench.profile import load_profile
+from hydrojet_bench.twin import DigitalTwin, SensorNoise, SetupErrors, TwinConfig
+
+REPO = Path(__file__).resolve().parents[2]
+PROFILE = load_profile(REPO / "profiles/sim.toml")
+PLAN = calibration_plan(6, seed=3)
+
+
+def _twin_steps(setup: SetupErrors):
+    twin = DigitalTwin(TwinConfig.from_profile(PROFILE, setup=setup, noise=SensorNoise.off(),
+                                                  settle_time_constant_s=0.0))
+    return twin.run_plan(PLAN, record_window_s=0.5, sensors="truth").to_dataset(PROFILE, "t").quasistatic_steps(
+        window_s=None)
+
+
+def _model_angles_deg(steps, effect, values):
+    model = make_model("cosserat", (load_effect("gravity"),) + ((effect,) if effect is not None else ()))
+    errors = []
+    for row in range(len(steps)):
+        params = with_parameters(steps.model_parameters(row), values)
+        solution = model.solve(steps.jet_forces_n[row], params)
+        errors.append(rotation_angle_deg(solution.tip_sensor_quaternion(), steps.tip_orientation_in_base()[row]))
+    return np.array(errors)
+
+
+@pytest.mark.parametrize("setup, effect, values", [
+    (SetupErrors(jet_wiring=(1, 3, 2)), JetWiring((1, 3, 2)), {}),
+    (SetupErrors(jet_wiring=(2, 3, 1)), JetWiring((2, 3, 1)), {}),
+    (SetupErrors(base_sensor_rotvec_rad=(0.1, -0.05, 0.3)), BaseSensorMounting(),
+     {"base_sensor_mounting.rx_rad": 0.1, "base_sensor_mounting.ry_rad": -0.05, "base_sensor_mounting.rz_rad": 0.3}),
+])
+def test_a_setup_hypothesis_at_the_true_value_reproduces_the_twin(setup, effect, values):
+    steps = _twin_steps(setup)
+    assert np.max(_model_angles_deg(steps, None, {})) > 5.0  # the error is visible...
+    assert np.max(_model_angles_deg(steps, effect, values)) < 1e-3  # ...and the hypothesis explains it exactly
+
+
+def test_tracker_tilt_turns_gravity_and_nothing_else():
+    params = PROFILE.model_parameters()
+    rotation = tilt_rotation(np.array(params.gravity_in_base_m_s2), 0.1, -0.04)
+    turned = replace(params, gravity_in_base_m_s2=tuple(rotation @ np.array(params.gravity_in_base_m_s2)))
+    tilted = make_model("cosserat", (load_effect("gravity"), TrackerTilt()))
+    plain = make_model("cosserat", (load_effect("gravity"),))
+    forces = (0.02, 0.05, 0.0)
+    expected = plain.solve(forces, turned).tip_position_in_base_m
+    got = tilted.solve(forces, with_parameters(params, {"tracker_tilt.about_u_rad": 0.1,
+                                                        "tracker_tilt.about_v_rad": -0.04})).tip_position_in_base_m
+    np.testing.assert_allclose(got, expected, atol=1e-9)
+    assert abs(np.degrees(np.arccos(rotation[2, 2])) - np.degrees(np.hypot(0.1, 0.04))) < 1e-9
+
+
+def _candidate(name, score, qualifies=True, parameters=None):
+    return CandidateResult(name, f"{name} explained", parameters or {}, 0.2, 0.9, score, score - 100.0, qualifies,
+                           {}, None, 0.0, 0.0, 10)
+
+
+def _diagnosis(ranking, verdict):
+    """A stand-in with the fields with_setup_stage reads and replaces (a full Diagnosis
+    takes a minute of fitting)."""
+    cls = make_dataclass("D", [("verdict", str), ("explanation", str), ("ranking", tuple), ("alternatives", tuple),
+                               ("remaining_excess", bool), ("at_floor_threshold_deg", float),
+                               ("setup_ranking", tuple), ("verdict_kind", str), ("setup_fix", object)], frozen=True)
+    return cls(verdict, "", tuple(ranking), (), False, 0.25, (), "", None)
+
+
+def test_setup_goes_first_and_a_tied_physical_effect_is_listed():
+    steps = _twin_steps(SetupErrors())
+    ranking = [_candidate("jet_misalignment", 50.0), _candidate("jet_wiring_132", 55.0), _candidate("gravity", 80.0)]
+    result = with_setup_stage(_diagnosis(ranking, "jet_misalignment"), steps, 10.0)
+    assert (result.verdict_kind, result.verdict) == ("setup", "jet_wiring_132")
+    assert result.alternatives == ("jet_misalignment",)
+    assert result.setup_fix.action == "swap the valve cables of jets 2 and 3"
+    assert "jet_misalignment explains the data as well; to tell them apart: fire each jet alone" in result.explanation
+    assert [c.effect for c in result.ranking] == ["jet_misalignment", "gravity"]
+    assert [c.effect for c in result.setup_ranking] == ["jet_wiring_132"]
+
+
+def test_physics_far_better_than_any_setup_hypothesis_keeps_the_verdict():
+    steps = _twin_steps(SetupErrors())
+    ranking = [_candidate("gravity", 10.0), _candidate("tracker_tilt", 40.0, parameters={
+        "tracker_tilt.about_u_rad": (0.01, 0.001), "tracker_tilt.about_v_rad": (0.0, 0.001)})]
+    result = with_setup_stage(_diagnosis(ranking, "gravity"), steps, 10.0)
+    assert (result.verdict_kind, result.verdict, result.setup_fix) == ("physics", "gravity", None)
+    unexplained = with_setup_stage(_diagnosis([_candidate("gravity", 10.0, qualifies=False)], "unexplained"), steps,
+                                   10.0)
+    assert unexplained.verdict_kind == "unexplained"
+
+
+def test_the_fix_replaces_the_key_in_its_table_or_adds_it():
+    text = "[gravity]\nin_tracker_m_s2 = [0.0, 0.0, -9.81]\n\n[base]\nx = 1\n"
+    fix = SetupFix("tracker_tilt", "level it", "gravity.in_tracker_m_s2", (0.1, 0.2, -9.8))
+    assert corrected_profile_text(text, fix) == ("[gravity]\nin_tracker_m_s2 = [0.1, 0.2, -9.8]  # corrected by "
+                                                 "diagnose\n\n[base]\nx = 1\n")
+    mounting = SetupFix("base_sensor_mounting", "turn it", "base_sensor.rotation_in_base", (1.0, 0.0, 0.0, 0.0))
+    assert corrected_profile_text(text, mounting).endswith("[base_sensor]\nrotation_in_base = [1.0, 0.0, 0.0, 0.0]  "
+                                                           "# corrected by diagnose\n")

@@ -1,0 +1,58 @@
+"""Setup errors the twin simulates: what each does to the measurements, and how
+`simulate --hidden NAME=VALUES` reads them."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from hydrojet_bench.errors import UserError
+from hydrojet_bench.geometry import rotation_angle_deg
+from hydrojet_bench.profile import load_profile
+from hydrojet_bench.twin import DigitalTwin, SensorNoise, SetupErrors, TwinConfig, parse_setup_error
+
+PROFILE = load_profile("sim")
+
+
+def _twin(**setup) -> DigitalTwin:
+    return DigitalTwin(TwinConfig.from_profile(PROFILE, noise=SensorNoise.off(), settle_time_constant_s=0.0,
+                                               setup=SetupErrors(**setup)))
+
+
+def test_a_swapped_pair_fires_the_other_jet():
+    correct, swapped = _twin(), _twin(jet_wiring=(1, 3, 2))
+    for jet, physical in ((0, 0), (1, 2), (2, 1)):
+        forces = np.eye(3)[jet] * 0.03
+        other = np.eye(3)[physical] * 0.03
+        np.testing.assert_allclose(swapped.command_jet_forces(forces, 1.0 + jet).tip_rotation_in_base,
+                                   correct.command_jet_forces(other, 1.0 + jet).tip_rotation_in_base, atol=1e-12)
+
+
+def test_a_tilted_tracker_turns_gravity_and_a_turned_base_sensor_turns_its_reading():
+    tilted = _twin(tracker_tilt_deg=(3.0, 4.0))
+    angle = np.degrees(np.arccos(-tilted.gravity_in_tracker_m_s2[2] / np.linalg.norm(tilted.gravity_in_tracker_m_s2)))
+    assert angle == pytest.approx(5.0, abs=0.01)  # 3 and 4 degrees about two axes: ~5 degrees
+    base_q, _ = _twin().sensor_poses("base", 0.0)
+    turned_q, _ = _twin(base_sensor_rotvec_rad=(0.0, 0.0, 0.2)).sensor_poses("base", 0.0)
+    assert rotation_angle_deg(base_q, turned_q) == pytest.approx(np.degrees(0.2), abs=1e-9)
+
+
+def test_setup_errors_parse_as_simulate_takes_them():
+    errors = parse_setup_error("tracker_tilt_deg=2,-1", parse_setup_error("jet_wiring=2,3,1"))
+    assert errors == SetupErrors(jet_wiring=(2, 3, 1), tracker_tilt_deg=(2.0, -1.0))
+    for text, message in (("jet_wiring=1,1,2", "must be a permutation of 1, 2, 3"),
+                          ("base_sensor_rotvec=0,0", "takes 3 comma-separated numbers, got 2"),
+                          ("tracker_tilt_deg=a,b", "takes 2 comma-separated numbers")):
+        with pytest.raises(UserError, match=message):
+            parse_setup_error(text)
+
+
+def test_simulate_refuses_a_bad_setup_error_in_one_line(tmp_path):
+    done = subprocess.run([sys.executable, "-m", "hydrojet_bench.cli", "simulate", "-o", str(tmp_path / "x.csv"),
+                           "--hidden", "jet_wiring=1,2,2"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert done.stderr.strip().splitlines() == [
+        "error: setup error 'jet_wiring=1,2,2': SetupErrors.jet_wiring must be a permutation of 1, 2, 3, got (1, 2, 2)"]
