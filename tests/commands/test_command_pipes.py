@@ -45,7 +45,9 @@ def folder(tmp_path_factory) -> Path:
                                                hidden_effect_values=(("jet_gain.gain_3", 0.85),), seed=3))
     plan = calibration_plan(20) + validation_sweeps(0.1, steps_up=5, repetitions=2)
     write_csv(twin.run_plan(plan).to_dataset(profile, "short twin"), folder / f"{LONG_NAME}.csv")
-    run = whole(piped("run", "--plan", "calibration:6", "--time-scale", "50", "--log", f"{LONG_NAME}.mcap",
+    # x25, not faster: at x50 the emulated IMUs fall so far behind (issue 15) that `sensors`
+    # may find no IMU sample close enough to an EM sample to align them.
+    run = whole(piped("run", "--plan", "calibration:6", "--time-scale", "25", "--log", f"{LONG_NAME}.mcap",
                       cwd=folder))
     assert "step 6/6" in run.stderr and "step 6/6" not in run.stdout  # progress
     assert "session done: 6/6 steps" in run.stdout and f"replay {LONG_NAME}.mcap --online" in run.stdout
