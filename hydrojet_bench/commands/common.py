@@ -51,3 +51,20 @@ def load_steps(path: Path, profile: str | None) -> tuple[RigProfile, Dataset]:
         profile = "sim"
     dataset = load_dataset(path, profile)
     return dataset.profile, dataset.quasistatic_steps()
+
+
+def comparison_steps(path: Path, profile: str | None,
+                     loaded: tuple[RigProfile, Dataset] | None = None) -> tuple[RigProfile, Dataset, Dataset]:
+    """What `compare` predicts: the profile, the steps (a session log's own settled steps,
+    the rows its live estimator predicted; else `load_steps`, or ``loaded`` when the
+    caller has them) and the validation steps among them (sweep >= 0; all of them when
+    there are no sweeps)."""
+    from ..bench.replay import logged_steps
+
+    logged = logged_steps(path, profile) if Path(path).suffix.lower() == ".mcap" else None
+    profile_used, steps = ((logged.profile, logged) if logged is not None
+                           else loaded if loaded is not None else load_steps(path, profile))
+    validation = steps.select(steps.sweep >= 0) if (steps.sweep >= 0).any() else steps
+    if len(validation) == 0:
+        raise UserError(f"{path}: no steps to compare")
+    return profile_used, steps, validation

@@ -21,19 +21,17 @@ from rich.console import Console
 from ..analysis.breakdowns import (MISSING_LABEL, STRAIGHT, STRAIGHT_BELOW_DEG, Breakdowns, JetScale, break_down,
                                    direction_order, disturbance_by_sweep, jet_force_scales, noise_only_gap,
                                    per_step)
-from ..analysis.compare import Comparison, compare, compare_methods
+from ..analysis.compare import Comparison, compare_methods
 from ..analysis.diagnosis import NoiseFloor, estimate_noise_floor
-from ..analysis.diagnosis.fitting import session_gravity
+from ..analysis.diagnosis.fitting import scored_as_diagnosed
 from ..analysis.metrics import ErrorSummary
-from ..bench.replay import logged_steps
 from ..data.dataset import Dataset
 from ..errors import UserError
 from ..estimation import OnlineSettings
-from ..estimation.path import REF, PathPredictor, Predictions
 from ..model_choice import ModelChoice, choose_model, model_choice
 from ..models.shooting import ShootingModel
 from . import render
-from .common import add_input_arguments, add_model_arguments, load_steps
+from .common import add_input_arguments, add_model_arguments, comparison_steps
 from .figure_options import add_format_argument
 from .log_notice import warn_if_incomplete
 
@@ -83,23 +81,15 @@ def run(args: argparse.Namespace) -> int:
     before_choice = None if args.baseline is None else choose_model(args.model, (), args.baseline,
                                                                     effect_files=args.effect)
     after_choice = model_choice(args)
-    # A session log's own settled steps are the rows its live estimator predicted: on
-    # them, Ref. and Proposed are the live figures.
-    logged = logged_steps(args.input, args.profile) if Path(args.input).suffix.lower() == ".mcap" else None
-    profile, steps = (logged.profile, logged) if logged is not None else load_steps(args.input, args.profile)
+    # On a session log's own settled steps, Ref. and Proposed are the live figures.
+    profile, steps, validation = comparison_steps(args.input, args.profile)
     log_damage = warn_if_incomplete(args.input)
-    validation = steps.select(steps.sweep >= 0) if (steps.sweep >= 0).any() else steps
-    if len(validation) == 0:
-        raise UserError(f"{args.input}: no steps to compare")
 
     def evaluate(choice: ModelChoice) -> Evaluation:
         params = choice.parameters(profile.model_parameters())
         results = compare_methods(choice.model, params, validation, OnlineSettings() if args.online else None)
-        # Per-step gravity (the live figures) lets a model follow the base sensor's noise,
-        # below the floor diagnose measures; its promise is checked the way it scored.
-        as_diagnosed = None if before_choice is None else compare(
-            Predictions.along(PathPredictor(choice.model, params).predict(validation, session_gravity(validation)),
-                              REF), validation).overall
+        # diagnose's promise is checked the way it scored.
+        as_diagnosed = None if before_choice is None else scored_as_diagnosed(choice.model, params, validation)
         return Evaluation(choice.parameter_path, choice.model, results,
                           {key: break_down(c, validation) for key, c in results.items()},
                           jet_force_scales(choice.model, params, validation), as_diagnosed)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -23,20 +24,22 @@ from rich.panel import Panel
 from ..analysis.diagnosis import NONE, UNEXPLAINED, Diagnosis, DiagnosisSettings, diagnose
 from ..analysis.diagnosis.engine import DEFAULT_DEPTH, default_candidates
 from ..analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
+from ..analysis.diagnosis.fitting import scored_as_diagnosed
 from ..analysis.diagnosis.noise import repeatability_floor
 from ..analysis.diagnosis.separate import separating_plan, write_separating_plan
 from ..analysis.diagnosis.setup import SETUP, corrected_profile_text
 from ..plans import DEFAULT_SETTLE_S
 from ..inputs import load_dataset
+from ..data.dataset import Dataset
 from ..effects import Effect, load_effect
 from ..errors import ConvergenceError, UserError
 from ..estimation.calibration import ALL_ROWS
 from ..files import check_writable_target, create_numbered, make_folder_for, publish
-from ..model_choice import COSSERAT, ModelChoice, model_choice
+from ..model_choice import COSSERAT, ModelChoice, choose_model, model_choice
 from ..params_io import ParameterFile, effect_specs, write_parameter_file
 from ..profile import RigProfile
 from . import render
-from .common import add_input_arguments, add_model_arguments, load_steps
+from .common import add_input_arguments, add_model_arguments, comparison_steps, load_steps
 from .figure_options import add_format_argument
 from .log_notice import warn_if_incomplete
 from .next_steps import command, effect_words, input_words, print_next
@@ -94,9 +97,12 @@ def run(args: argparse.Namespace) -> int:
     if args.export is not None:
         write_export(args.export, diagnosis, choice, tried, args, profile)
         console.print(f"wrote {render.plain(args.export)}")
-    print_next_steps(console, diagnosis, args, tried)
+    preview = add_step_preview(args, profile, steps, diagnosis, tried)
+    print_next_steps(console, diagnosis, args, tried, preview)
     if args.json:
-        render.write_json(args.json, {"data": str(args.input), **diagnosis.as_dict(), "log_damage": log_damage})
+        render.write_json(args.json, {"data": str(args.input), **diagnosis.as_dict(),
+                                      "add_step": None if preview is None else preview.as_dict(),
+                                      "log_damage": log_damage})
     if args.export_profile is not None:
         _export_profile(console, diagnosis, profile, args.export_profile)
     if args.report:
@@ -216,7 +222,7 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
             lines.append(f"{stage.verdict} explains the held-out data no better than {', '.join(stage.alternatives)} "
                          f"within noise (paired test at the {DiagnosisSettings().significance:.0%} level): see the separating plan.")
     final = diagnosis.final
-    if final.remaining_excess:
+    if final.remaining_excess and diagnosis.found:
         lines.append("Even with it the held-out error stays above the noise floor: something else is missing too.")
     # On a pipe the console is as wide as a table may need: the box fits its text there.
     console.print(Panel("\n".join(lines), title=title, border_style=style, expand=console.is_terminal))
@@ -257,8 +263,63 @@ def write_export(path: Path, diagnosis: Diagnosis, choice: ModelChoice, candidat
     publish(path, "parameter file", lambda partial: write_parameter_file(partial, content))
 
 
+@dataclass(frozen=True)
+class AddStepPreview:
+    """The add step diagnose prints, and what its `compare --baseline` will show on the
+    row "all, as diagnose scores" (Ref. orientation RMSE over the validation steps, deg)
+    before and after the named effects, each calibrated as the printed commands do: on
+    every row, the held-out repetitions too, so "before" reads lower than the held-out
+    error the diagnosis promises to remove."""
+
+    commands: tuple[str, ...]
+    compare_before_deg: float
+    compare_after_deg: float
+
+    def as_dict(self) -> dict:
+        return {"commands": list(self.commands), "compare_before_deg": self.compare_before_deg,
+                "compare_after_deg": self.compare_after_deg}
+
+
+def add_step_preview(args: argparse.Namespace, profile: RigProfile, steps: Dataset, diagnosis: Diagnosis,
+                     candidates: Sequence[Effect]) -> AddStepPreview | None:
+    """The add step's commands and the figures they will show, computed by the code the
+    commands run (`api.calibrate`, `scored_as_diagnosed` on `comparison_steps`); None
+    when the diagnosis names no effect."""
+    found = _found_effects(diagnosis, candidates)
+    if diagnosis.verdict_kind == SETUP or not found:
+        return None
+    from .. import api
+    from ..api.results import Measurements
+
+    specs = [next((s for s in args.candidate if ":" in s and load_effect(s).name == effect.name), effect.name)
+             for effect in found]
+    words, model = input_words(args), ("--model", diagnosis.model, *effect_words(args.effect))
+    # Both calibrations fit the poses and the sweeps, as the diagnosis did (its training
+    # steps), and the held-out repetitions with them.
+    lines = [command("calibrate", *words, *model, "--fit-on", ALL_ROWS, "-o", "before.toml")]
+    if args.export is None:
+        lines.append(command("calibrate", *words, *model, "--fit-on", ALL_ROWS, *effect_words(specs),
+                             "-o", "after.toml"))
+    lines.append(command("compare", *words, "--params", args.export or "after.toml", "--baseline", "before.toml",
+                         "--online"))
+    _, _, validation = comparison_steps(args.input, args.profile, (profile, steps))
+    data = Measurements(Path(args.input), profile, steps, None)
+
+    def shown(effects: list[str]) -> float:
+        fitted = api.calibrate(data, model=diagnosis.model, effects=effects, fit_on=ALL_ROWS)
+        return scored_as_diagnosed(fitted.model, fitted.fit.params, validation).orientation_rmse_deg
+
+    if args.export is None:
+        after = shown(list(args.effect) + specs)
+    else:
+        exported = choose_model(None, (), args.export)
+        after = scored_as_diagnosed(exported.model, exported.parameters(profile.model_parameters()),
+                                    validation).orientation_rmse_deg
+    return AddStepPreview(tuple(lines), shown(list(args.effect)), after)
+
+
 def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Namespace,
-                     candidates: Sequence[Effect]) -> None:
+                     candidates: Sequence[Effect], preview: AddStepPreview | None) -> None:
     """What to run next, as commands that run as printed (one per line, never wrapped)."""
     data = input_words(args)
     known = ("--model", diagnosis.model, *effect_words(args.effect))
@@ -271,8 +332,7 @@ def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Name
             command("diagnose", *data, *known, "--export-profile", "fixed.toml"),
             command("diagnose", args.input, "--profile", "fixed.toml", *known)])
         return
-    found = _found_effects(diagnosis, candidates)
-    if not found:
+    if preview is None:
         calibrate = command("calibrate", *data, *known, "-o", "p.toml")
         if diagnosis.verdict == NONE:
             print_next(console, "the model is complete for these data; calibrate it with", [calibrate])
@@ -282,19 +342,11 @@ def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Name
             "then write the missing physics as an effect file (see docs/examples/) and try it with "
             "diagnose --candidate path/to/file.py:Class."])
         return
-    specs = [next((s for s in args.candidate if ":" in s and load_effect(s).name == effect.name), effect.name)
-             for effect in found]
-    # Both calibrations fit the poses and the sweeps, as the diagnosis did (its training
-    # steps), so that compare shows what was promised.
-    fit_on = ("--fit-on", ALL_ROWS)
-    lines = [command("calibrate", *data, *known, *fit_on, "-o", "before.toml")]
-    if args.export is None:
-        lines.append(command("calibrate", *data, *known, *fit_on, *effect_words(specs), "-o", "after.toml"))
-    lines.append(command("compare", *data, "--params", args.export or "after.toml", "--baseline", "before.toml",
-                         "--online"))
-    print_next(console, f"with {' + '.join(effect.name for effect in found)} the held-out error should fall from "
-               f"{diagnosis.baseline_heldout_rmse_deg:.3f} deg to about "
-               f"{diagnosis.found[-1].heldout_orientation_rmse_deg:.3f} deg; watch it with", lines)
+    found = " + ".join(effect.effect for effect in diagnosis.found)
+    print_next(console, f"with {found} the held-out error should fall from {diagnosis.baseline_heldout_rmse_deg:.3f} "
+               f"deg to about {diagnosis.found[-1].heldout_orientation_rmse_deg:.3f} deg. These commands fit every "
+               f"row, the held-out ones too: compare's row \"all, as diagnose scores\" will show "
+               f"{preview.compare_before_deg:.3f} -> {preview.compare_after_deg:.3f} deg", list(preview.commands))
 
 
 def _print_setup(console: Console, diagnosis: Diagnosis) -> None:

@@ -66,14 +66,25 @@ def expected_verdict(cell: Cell) -> str | None:
 def right_verdict(cell: Cell, diagnosis: Diagnosis) -> bool:
     """Issue 12's "right": the hidden effect (every hidden one for a pair) named or
     listed as an alternative; or "none" where the baseline's held-out error is at the
-    floor (the effect below detection); "unexplained" for an effect outside the library."""
+    floor (the effect below detection); "unexplained" for an effect outside the library.
+
+    A pair is also right when every effect named is one of the pair (or tied with one)
+    and the named ones leave the held-out error at the floor: the other is then below
+    detection on these data, the rule that makes "none" right for a single effect,
+    applied to what the first effect leaves."""
+    stages = (diagnosis, *diagnosis.stages)
     named = {found.effect for found in diagnosis.found}
-    named |= {alternative for stage in (diagnosis, *diagnosis.stages) for alternative in stage.alternatives}
+    named |= {alternative for stage in stages for alternative in stage.alternatives}
     if diagnosis.verdict == NONE:
         return diagnosis.baseline_heldout_rmse_deg <= diagnosis.at_floor_threshold_deg
     expected = expected_verdict(cell)
     if expected is None:
-        return set(cell.truth.split("+")) <= named
+        truth = set(cell.truth.split("+"))
+        if truth <= named:
+            return True
+        tied = {stage.verdict: {stage.verdict, *stage.alternatives} for stage in stages}
+        return (bool(diagnosis.found) and not diagnosis.final.remaining_excess
+                and all(tied.get(found.effect, {found.effect}) & truth for found in diagnosis.found))
     if expected == UNEXPLAINED:
         return diagnosis.verdict == UNEXPLAINED
     return expected in named

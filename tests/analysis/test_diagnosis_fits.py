@@ -94,6 +94,17 @@ def test_strain_stiffening_three_times_the_search_bound_is_refitted_to_the_physi
     assert_recovered(diagnosis, hidden)
 
 
+def test_stiffening_the_baseline_absorbed_into_e_is_found_by_the_profile_scan():
+    # At 4 /N the baseline's E has moved so far that every fit of the coefficient from
+    # there runs to the wrong sign (the library study read "unexplained" here); the
+    # second pass re-fits E at each scanned coefficient and finds the basin.
+    hidden = {"pressure_stiffening.coefficient_1_n": 4.0}
+    diagnosis = diagnose(steps_with(hidden), "cosserat",
+                         candidates=candidates("pressure_stiffening", "nonlinear_elasticity", "gravity"))
+    assert diagnosis.verdict == "pressure_stiffening"
+    assert_recovered(diagnosis, hidden)
+
+
 def test_clamp_play_at_the_old_bound_is_not_clipped_there(play_steps):
     diagnosis = diagnose(play_steps, "cosserat", candidates=candidates("base_hysteresis", "base_compliance"))
     assert diagnosis.verdict == "base_hysteresis" and diagnosis.winner.widened

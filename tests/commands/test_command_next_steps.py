@@ -10,9 +10,12 @@ expecting exit 0; so is every command those print, until none is new.
 
 from __future__ import annotations
 
+import json
 import shlex
 import shutil
 from pathlib import Path
+
+import pytest
 
 from hydrojet_bench.cli import main
 
@@ -54,6 +57,18 @@ def test_every_printed_next_command_runs_as_printed(tmp_path, monkeypatch, capsy
     # compare each calibration suggests.
     assert names.count("calibrate") == 2 and names.count("compare") >= 2, ran
     assert any("--baseline" in argv for argv in ran)
+
+    # The add step shows what diagnose said it would: the figures diagnose computed for
+    # the printed compare are the ones that compare prints.
+    diagnosed = next(argv for argv in ran if argv[0] == "diagnose")
+    assert main([*diagnosed, "--json", "diagnosis.json"]) == 0
+    preview = json.loads((tmp_path / "diagnosis.json").read_text())["add_step"]
+    compared = next(argv for argv in ran if argv[0] == "compare" and "--baseline" in argv)
+    assert main([*compared, "--json", "compare.json"]) == 0
+    shown = json.loads((tmp_path / "compare.json").read_text())
+    assert shown["baseline"]["as_diagnosed"]["orientation_rmse_deg"] == pytest.approx(preview["compare_before_deg"],
+                                                                                      rel=1e-6)
+    assert shown["as_diagnosed"]["orientation_rmse_deg"] == pytest.approx(preview["compare_after_deg"], rel=1e-6)
 
     # A parameter file written to another folder finds the user's effect file relative
     # to itself, so the compare calibrate prints runs from where the user is.

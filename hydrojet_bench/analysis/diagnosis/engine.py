@@ -18,6 +18,11 @@
      (baseline^2 - candidate^2) / (baseline^2 - floor^2), on held-out RMSEs) and beat
      the baseline's score; ``unexplained`` when none does. An unconverged fit never
      qualifies and is ranked after every converged one.
+   * before a stage says ``unexplained``, its one- and two-parameter candidates get a
+     second pass: a profile scan of their parameters with the baseline's re-fitted at
+     each point (`fitting.profile_starts`), and the decision is taken again. A stiffening
+     effect the baseline has absorbed into E lies in a basin no fit from the baseline's
+     optimum reaches.
 
 5. Ties: another qualifying candidate whose held-out errors are not significantly
    larger than the winner's (a one-sided paired t test on the per-step squared errors
@@ -68,7 +73,7 @@ from ...geometry import rotation_angle_deg
 from ...params import ModelParameters
 from .evidence import (NOISE_GAP_PER_FLOOR, OnlineEvidence, cosine, hysteresis_gap_deg, online_evidence,
                        rmse_by_jet, rotation_between)
-from .fitting import Fit, Problem, fit, fit_candidates, session_gravity
+from .fitting import Fit, Problem, fit, fit_candidates, refit_candidates, session_gravity
 from .noise import NoiseFloor, estimate_noise_floor
 from .separate import SeparatingPose, separating_poses
 from .setup import SETUP_PREFERENCE_SCORE, SetupFix, fit_wirings, hypotheses, with_setup_stage
@@ -182,7 +187,8 @@ class Diagnosis:
     unconverged ones, then failed fits. alternatives: qualifying candidates the held-out
     test cannot tell from the winner. at_floor_threshold_deg: the largest held-out RMSE
     the F test calls "at the floor". remaining_excess: whether the winner still leaves
-    a held-out error above that threshold (more physics missing). stages: the later
+    a held-out error above that threshold (more physics missing; always so when the
+    verdict is "unexplained", never when it is "none"). stages: the later
     stages (the winner added to the baseline, the rest tried on top). found: every
     effect named, over all stages. separating_poses: where the winner and its
     alternatives differ most (empty without alternatives).
@@ -363,11 +369,21 @@ def _stage(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baselin
            say: Callable[[str], None], fitted_first: tuple[Sequence[Effect], Sequence[Fit]] = ((), ())) -> Diagnosis:
     """One round: every candidate on top of ``baseline``, and the decision.
     fitted_first: candidates already fitted another way (the wirings), with their fits."""
-    fits = list(fitted_first[1]) + fit_candidates(problem, candidates, baseline, settings.workers,
-                                                  progress=lambda done: say(f"fitted {done.effect} ({done.convergence})"))
+    fits = fit_candidates(problem, candidates, baseline, settings.workers,
+                          progress=lambda done: say(f"fitted {done.effect} ({done.convergence})"))
     online = online_evidence(problem.model(), baseline.params, problem.steps, problem.split.held_out,
                              problem.gravity_in_base_m_s2, settings.online)
-    return _decide(problem, known, noise, baseline, (*fitted_first[0], *candidates), fits, online, settings, started)
+    tried = (*fitted_first[0], *candidates)
+    decided = _decide(problem, known, noise, baseline, tried, [*fitted_first[1], *fits], online, settings, started)
+    if decided.verdict != UNEXPLAINED:
+        return decided
+    # Second pass: a candidate whose effect trades off against E, L or w_d may sit in the
+    # wrong basin (see `fitting.profile_starts`). Only where nothing explained the excess:
+    # a winner that leaves some is followed by the next stage, on top of it.
+    say("nothing explains the excess yet: profile scans of the one- and two-parameter candidates")
+    fits = refit_candidates(problem, candidates, baseline, fits, settings.workers,
+                            progress=lambda done: say(f"refitted {done.effect} ({done.convergence})"))
+    return _decide(problem, known, noise, baseline, tried, [*fitted_first[1], *fits], online, settings, started)
 
 
 def _found(first: Diagnosis, stages: Sequence[Diagnosis]) -> tuple[FoundEffect, ...]:
@@ -454,6 +470,7 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
                        f"{settings.significance:.0%} level): no effect is missing that these data can show.")
     elif not qualifying:
         verdict = UNEXPLAINED
+        remaining = True
         best = ranking[0]
         explanation = (f"The baseline's held-out error ({base_rmse:.3f} deg) is above the noise floor "
                        f"({floor:.3f} deg), but no library effect removes half of the excess (best: {best.effect}, "

@@ -63,6 +63,8 @@ import numpy as np
 from dask.callbacks import Callback
 
 from ...data.dataset import Dataset
+from ..compare import compare
+from ..metrics import ErrorSummary
 from ...effects import Effect, qualified_parameter_names
 from ...effects.base import at_physical_limits
 from ...errors import ConvergenceError
@@ -92,6 +94,13 @@ BOUND_SHARE = 1e-3
 # the step along each axis (share of the bounds' span) for more.
 SCAN_POINTS = {1: 5, 2: 3}
 SCAN_AXIS_SHARE = 0.25
+# The profile scan (`profile_starts`), for one- and two-parameter effects: the shares of
+# the way from the default to each bound it tries per parameter (their grid, or only its
+# axes through the default when the grid has more than `PROFILE_MAX_POINTS`), and the
+# evaluations the baseline's parameters get at each point.
+PROFILE_AXIS_SHARES = {1: (0.1, 0.3, 1.0), 2: (0.25, 1.0)}
+PROFILE_MAX_POINTS = 12
+PROFILE_EVALUATIONS = 8
 # A base that tilts less than this over a session is clamped (tracker noise is ~0.7 deg
 # per sample, ~0.1 deg per averaged step).
 STATIC_BASE_DEG = 2.0
@@ -192,6 +201,14 @@ def predict_path(model: ShootingModel, params: ModelParameters, steps: Dataset,
     return Predictions.along(path, REF), sensor_positions
 
 
+def scored_as_diagnosed(model: ShootingModel, params: ModelParameters, steps: Dataset) -> ErrorSummary:
+    """Ref.'s errors on ``steps`` as a diagnosis scores them: along the path, gravity
+    held at the steps' mean when the base is static (`session_gravity`). Per-step gravity
+    would let a model follow the base sensor's noise, below the floor diagnose measures."""
+    predictions, _ = predict_path(model, params, steps, session_gravity(steps))
+    return compare(predictions, steps).overall
+
+
 def training_poses(problem: Problem) -> list[CalibrationPose]:
     """The solved prefix of the session as calibration poses, with the session's gravity
     and the tip sensor's own position."""
@@ -221,7 +238,6 @@ def fit(problem: Problem, candidate: Effect | None = None, start: ModelParameter
 def _fit_once(problem: Problem, candidate: Effect | None, start: ModelParameters, max_evaluations: int) -> Fit:
     model = problem.model(candidate)
     names = problem.names(candidate)
-    split = problem.split
     label = None if candidate is None else candidate.name
     sigma2 = problem.orientation_sigma_rad**2
     try:
@@ -229,7 +245,7 @@ def _fit_once(problem: Problem, candidate: Effect | None, start: ModelParameters
                            position_weight_rad_per_m=problem.position_weight_rad_per_m,
                            max_evaluations=max_evaluations, follow_path=True, cost_tolerance=COST_TOLERANCE,
                            gradient_tolerance=GRADIENT_TOLERANCE / 2.0, variance_floor=sigma2,
-                           fitted=split.training[split.solved])
+                           fitted=split_training_rows(problem))
         predictions, sensor_positions = predict_path(model, result.params, problem.steps,
                                                      problem.gravity_in_base_m_s2)
     except (ConvergenceError, ValueError) as error:
@@ -275,6 +291,29 @@ def fit_candidate(problem: Problem, candidate: Effect, baseline: ModelParameters
     fits = [fit(problem, candidate, baseline, max_evaluations)]
     starts = scan_starts(problem, candidate, baseline, fits[0].training_chi2)
     fits += [fit(problem, candidate, start, max_evaluations) for start in starts]
+    return _best_of(problem, candidate, fits, max_evaluations)
+
+
+def refit_from_profile(problem: Problem, candidate: Effect, baseline: ModelParameters, first: Fit,
+                       max_evaluations: int | None = None) -> Fit:
+    """``first`` (the candidate's fit by `fit_candidate`), or a fit from the best point of
+    the profile scan (`profile_starts`) when that point beats it: the second pass of a
+    diagnosis whose first pass left the excess unexplained."""
+    max_evaluations = max_evaluations or CANDIDATE_MAX_EVALUATIONS
+    if first.error is not None or len(candidate.parameters) not in PROFILE_AXIS_SHARES:
+        return first
+    starts = profile_starts(problem, candidate, baseline, first.training_chi2)
+    if not starts:
+        return first
+    again = _best_of(problem, candidate, [fit(problem, candidate, start, max_evaluations) for start in starts],
+                     max_evaluations)
+    kept = again if _preference(again) < _preference(first) else first
+    return replace(kept, starts=first.starts + again.starts, evaluations=first.evaluations + again.evaluations)
+
+
+def _best_of(problem: Problem, candidate: Effect, fits: list[Fit], max_evaluations: int) -> Fit:
+    """The preferred of ``fits`` (`_preference`), refitted with its bounds widened to the
+    physical limits when it ends on a search bound."""
     best = min(fits, key=_preference)
     if best.error is None and best.at_bound:
         widened_effect = at_physical_limits(candidate)
@@ -320,6 +359,52 @@ def scan_starts(problem: Problem, candidate: Effect, baseline: ModelParameters,
     return [] if best is None else [best]
 
 
+def profile_starts(problem: Problem, candidate: Effect, baseline: ModelParameters,
+                   fitted_chi2: float) -> list[ModelParameters]:
+    """The best point of a profile scan of the candidate's own parameters, as another
+    start, when its chi^2 beats ``fitted_chi2`` by more than one; else none.
+
+    Unlike `scan_starts`, the baseline's parameters are re-fitted at every point (a few
+    evaluations, `PROFILE_EVALUATIONS`): an effect that trades off against E, L or w_d
+    (a stiffening one wants a softer rod beside it, a compliant clamp a stiffer one)
+    shows its basin only once they have moved out of its way, and a scan that holds the
+    baseline's optimum fixed sees every point of that basin as worse than none."""
+    names = qualified_parameter_names(candidate)
+    axes = [_profile_axis(parameter, PROFILE_AXIS_SHARES[len(names)]) for parameter in candidate.parameters]
+    defaults = tuple(parameter.default for parameter in candidate.parameters)
+    grid = [values for values in itertools.product(*axes) if values != defaults]
+    if len(grid) > PROFILE_MAX_POINTS:
+        grid = [values for values in grid if sum(v != d for v, d in zip(values, defaults)) == 1]
+    points = [dict(zip(names, values)) for values in grid]
+    model = problem.model(candidate)
+    rows = split_training_rows(problem)
+    best, best_cost = None, fitted_chi2 - 1.0
+    for point in points:
+        try:
+            result = calibrate(model, training_poses(problem), with_parameters(baseline, point), problem.names(),
+                               position_weight_rad_per_m=problem.position_weight_rad_per_m,
+                               max_evaluations=PROFILE_EVALUATIONS, follow_path=True, cost_tolerance=COST_TOLERANCE,
+                               fitted=rows)
+        except (ConvergenceError, ValueError):
+            continue
+        cost = training_cost(problem, model, result.params)
+        if cost < best_cost:
+            best, best_cost = result.params, cost
+    return [] if best is None else [best]
+
+
+def _profile_axis(parameter, shares: tuple[float, ...]) -> list[float]:
+    """The default, then ``shares`` of the way from it to each search bound."""
+    return [parameter.default] + [parameter.default + share * (bound - parameter.default)
+                                  for bound in (parameter.lower, parameter.upper) if bound != parameter.default
+                                  for share in shares]
+
+
+def split_training_rows(problem: Problem) -> np.ndarray:
+    """Which of the solved prefix's steps a fit is fitted on (the others carry the path)."""
+    return problem.split.training[problem.split.solved]
+
+
 def training_cost(problem: Problem, model: ShootingModel, params: ModelParameters) -> float:
     """Training chi^2 of ``params`` along the solved prefix (inf when a solve fails)."""
     prefix = np.flatnonzero(problem.split.solved)
@@ -355,15 +440,14 @@ def training_chi2(problem: Problem, predictions: Predictions, sensor_positions_m
 
 # --- candidates, in parallel ----------------------------------------------------------
 
-# What the worker processes fit: set before they are forked, so they inherit it (effects
-# loaded from user files included) instead of receiving it pickled.
-_WORK: tuple[Problem, tuple[Effect, ...], ModelParameters] | None = None
+# What the worker processes run, by candidate index: set before they are forked, so they
+# inherit it (effects loaded from user files included) instead of receiving it pickled.
+_WORK: Callable[[int], Fit] | None = None
 
 
-def _fit_candidate(index: int) -> Fit:
+def _run_work(index: int) -> Fit:
     assert _WORK is not None
-    problem, candidates, start = _WORK
-    return fit_candidate(problem, candidates[index], start)
+    return _WORK(index)
 
 
 def default_workers() -> int:
@@ -374,30 +458,50 @@ def default_workers() -> int:
 
 def fit_candidates(problem: Problem, candidates: Sequence[Effect], baseline: Fit, workers: int | None = None,
                    progress: Callable[[Fit], None] | None = None) -> list[Fit]:
-    """Fit every candidate from the baseline's calibration; returns the fits in
-    candidate order.
+    """Fit every candidate from the baseline's calibration (`fit_candidate`); returns the
+    fits in candidate order.
 
     workers: processes (default `default_workers`); 1 fits in this process, as does a
     platform without fork. The fits run on Dask, the engine studies run on: its local
     process scheduler here, whose forked pool starts in milliseconds (a distributed
     `LocalCluster` takes seconds, as long as the whole diagnosis).
     """
-    global _WORK
+    start = _baseline_params(baseline)
+    return _in_parallel(candidates, lambda index: fit_candidate(problem, candidates[index], start), workers, progress)
+
+
+def refit_candidates(problem: Problem, candidates: Sequence[Effect], baseline: Fit, fits: Sequence[Fit],
+                     workers: int | None = None, progress: Callable[[Fit], None] | None = None) -> list[Fit]:
+    """Each candidate's fit, or a better one from its profile scan (`refit_from_profile`),
+    in candidate order; ``workers`` as `fit_candidates`."""
+    start = _baseline_params(baseline)
+    return _in_parallel(candidates, lambda index: refit_from_profile(problem, candidates[index], start, fits[index]),
+                        workers, progress)
+
+
+def _baseline_params(baseline: Fit) -> ModelParameters:
     if baseline.params is None:
         raise ValueError("the baseline fit failed; no candidate can start from it")
+    return baseline.params
+
+
+def _in_parallel(candidates: Sequence[Effect], work: Callable[[int], Fit], workers: int | None,
+                 progress: Callable[[Fit], None] | None) -> list[Fit]:
+    """``work(index)`` for every candidate, on Dask (see `fit_candidates`), in candidate order."""
+    global _WORK
     count = len(candidates)
     workers = min(count, workers if workers is not None else default_workers())
     parallel = workers > 1 and "fork" in multiprocessing.get_all_start_methods()
     # Most parameters first: the slowest fits should not start last (Dask runs
     # independent tasks in key order).
     order = sorted(range(count), key=lambda index: -len(candidates[index].parameters))
-    graph = {("candidate", rank): (_fit_candidate, index) for rank, index in enumerate(order)}
+    graph = {("candidate", rank): (_run_work, index) for rank, index in enumerate(order)}
 
     def finished(key, result, graph, state, worker) -> None:
         if progress and isinstance(result, Fit):
             progress(result)
 
-    _WORK = (problem, tuple(candidates), baseline.params)
+    _WORK = work
     try:
         with Callback(posttask=finished):
             if parallel:
