@@ -3,7 +3,7 @@
 Layout (SI units, the same names as `hydrojet_bench.params`)::
 
     model = "cosserat"            # the model they were calibrated for
-    effects = ["gravity", "effects/tether.py:Tether"]   # the effects that were enabled:
+    effects = ["gravity", "effects/wall_contact.py:WallContact"]   # the effects that were enabled:
                                   # library names, or a user's file relative to this file
     [parameters]                  # flat names: E0, EL, L, wd_fx .. wd_mz, effect.parameter
     E0 = 2.98e5

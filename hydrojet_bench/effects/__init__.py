@@ -20,17 +20,18 @@ from .nonlinear_elasticity import NonlinearElasticity
 from .pressure_stiffening import PressureStiffening
 from .sensor_mounting import SensorMounting
 from .stiffness_profile import StiffnessProfile
+from .tip_pull import TipPull
 from .user import checked_effect
 
 # Canonical library, in the order users see it: gravity (on by default), then the
 # effects a calibration can add to diagnose a rig, grouped by what they act on
-# (actuation, constitutive law, clamp, measurement). Every default leaves the model
+# (actuation, constitutive law, clamp, measurement), then a load from outside the rod. Every default leaves the model
 # unchanged, so a calibration that adds an effect starts from the nominal model.
 LIBRARY: dict[str, type] = {
     effect.name: effect
     for effect in (Gravity, JetGain, JetMisalignment, PressureStiffening, NonlinearElasticity,
                    AnisotropicStiffness, StiffnessProfile, BaseCompliance, BaseHysteresis,
-                   SensorMounting)
+                   SensorMounting, TipPull)
 }
 
 __all__ = ["CALIBRATION_POSES", "Effect", "EffectParameter", "LIBRARY", "SWEEPS", "effect_values",

@@ -69,7 +69,12 @@ MAGNITUDES = {
                                     "base_hysteresis.play_rad": rng.uniform(0.015, 0.03)},
     "sensor_mounting": lambda rng: {f"sensor_mounting.r{axis}_rad": _sign(rng) * rng.uniform(0.02, 0.06)
                                     for axis in "xyz"},
+    "tip_pull": lambda rng: {f"tip_pull.force_{axis}_n": _sign(rng) * rng.uniform(0.004, 0.01) for axis in "xy"},
 }
+# A pull on the tip and gravity turned sideways (a tracker that is not level, a setup
+# hypothesis tried first) load the rod alike within noise at these sizes: either may
+# take the verdict as long as the other is listed beside it.
+EQUIVALENT = {"tip_pull": "tracker_tilt"}
 
 
 def case(effect: str, rig: str) -> tuple[dict[str, float], int]:
@@ -110,9 +115,12 @@ def test_diagnose_names_the_hidden_library_effect(effect, rig):
     print(summary(f"{effect} on the {rig} rig, {values}, seed {seed}", diagnosis))
     floor = diagnosis.noise_floor_deg
     assert diagnosis.baseline_heldout_rmse_deg >= 2.0 * floor, "precondition: the hidden effect must show"
-    assert diagnosis.verdict == effect
+    if diagnosis.verdict == EQUIVALENT.get(effect):
+        assert effect in diagnosis.alternatives
+    else:
+        assert diagnosis.verdict == effect
+        assert diagnosis.explanation == diagnosis.winner.explanation == LIBRARY[effect].explanation
     assert diagnosis.winner.heldout_orientation_rmse_deg <= 1.5 * floor
-    assert diagnosis.explanation == diagnosis.winner.explanation == LIBRARY[effect].explanation
     if effect == "base_hysteresis":
         # The path dependence shows in the evidence: loading and unloading residuals at the
         # same force differ by far more than noise (the mean norm of a difference of ~60

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from hydrojet_bench.effects import LIBRARY, Effect, load_effect
+from hydrojet_bench.effects.problem import RodProblem
 from hydrojet_bench.errors import ConvergenceError
 from hydrojet_bench.geometry import so3_exp, so3_log
 from hydrojet_bench.models import CosseratModel, PrbModel
@@ -37,6 +38,7 @@ TEST_VALUES = {
     "base_compliance": {"compliance_rad_per_nm": 40.0},
     "base_hysteresis": {"compliance_rad_per_nm": 40.0, "play_rad": 0.02},
     "sensor_mounting": {"rx_rad": 0.1, "ry_rad": -0.05, "rz_rad": 0.2},
+    "tip_pull": {"force_x_n": 0.03, "force_y_n": -0.02},
 }
 # Jets 2 and 3 on: every jet-specific effect has something to act on.
 JETS = (0.0, 0.06, 0.03)
@@ -260,6 +262,24 @@ def test_sensor_mounting_rotates_the_reading_not_the_rod(model_name):
     rotation = so3_exp([values["rx_rad"], values["ry_rad"], values["rz_rad"]])
     np.testing.assert_allclose(mounted.tip_sensor_in_base_sensor(), plain.tip_sensor_in_base_sensor() @ rotation,
                                rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("model_name", MODELS)
+def test_tip_pull_is_a_dead_load_the_tip_gives_way_to(model_name):
+    # A dead force fixed in the base frame (not a follower turning with the tip, as w_d
+    # is), applied at the tip itself; the tip gives way to it however the jets bend
+    # the rod (positive work), by millimetres at a fifth of a jet's force.
+    problem = RodProblem.nominal(NOMINAL, np.zeros(3), np.linspace(0.0, NOMINAL.rod.length_m, 5))
+    LIBRARY["tip_pull"]().apply(problem, {"force_x_n": 0.01, "force_y_n": 0.02})
+    np.testing.assert_array_equal(problem.tip_dead_force_in_base_n, [0.01, 0.02, 0.0])
+    np.testing.assert_array_equal(problem.tip_dead_force_arm_m_n, np.zeros((3, 3)))
+    model = MODELS[model_name](("gravity", "tip_pull"))
+    pull = np.array([0.0, 0.03, 0.0])
+    for jets in ((0.0, 0.0, 0.0), (0.12, 0.0, 0.0), (0.0, 0.0, 0.12)):
+        plain = model.solve(jets, NOMINAL)
+        pulled = model.solve(jets, with_effect("tip_pull", {"force_x_n": pull[0], "force_y_n": pull[1]}))
+        shift = pulled.tip_position_in_base_m - plain.tip_position_in_base_m
+        assert shift @ pull / np.linalg.norm(pull) > 1e-3, (jets, shift)
 
 
 def effect_change(model, name):
