@@ -47,6 +47,7 @@ HIDDEN = {
     "base_compliance": "base_compliance=100",
     "base_hysteresis": "base_hysteresis=20,0.01",
     "sensor_mounting": "sensor_mounting:rx_rad=0.03",
+    "tip_pull": "tip_pull:force_x_n=0.01",
 }
 PROGRAM = [sys.executable, "-m", "hydrojet_bench.cli"]
 
