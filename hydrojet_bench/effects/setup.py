@@ -80,8 +80,11 @@ class TrackerTilt:
 
 
 class BaseSensorMounting:
-    """The measured clamp frame is the true one turned by exp(r): the tip orientation in
-    the base frame reads exp(r)^T R_tip and gravity from the base pose reads exp(r)^T g."""
+    """The measured clamp frame is the true one turned by M = exp(r) about the base
+    sensor's origin o (``sensor_offset_in_clamp_m``, the profile's
+    ``base_sensor.offset_in_base_m``): the tip orientation in the base frame reads
+    M^T R_tip, a tip position reads M^T (p - o) + o, and gravity from the base pose
+    reads M^T g."""
 
     name: ClassVar[str] = "base_sensor_mounting"
     explanation: ClassVar[str] = (
@@ -98,10 +101,14 @@ class BaseSensorMounting:
     )
     uses_actuation: ClassVar[bool] = False
 
+    def __init__(self, sensor_offset_in_clamp_m: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        self.sensor_offset_in_clamp_m = np.array(sensor_offset_in_clamp_m, dtype=float)
+
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         rotation = so3_exp([values["rx_rad"], values["ry_rad"], values["rz_rad"]])
         rotate_gravity_load(problem, rotation)
         problem.base_sensor_mounting = problem.base_sensor_mounting @ rotation
+        problem.base_sensor_offset_m = self.sensor_offset_in_clamp_m
 
 
 class JetWiring:
@@ -129,6 +136,8 @@ WRONG_WIRINGS: tuple[tuple[int, int, int], ...] = tuple(
     w for w in itertools.permutations((1, 2, 3)) if w != (1, 2, 3))  # type: ignore[misc]
 
 
-def setup_effects() -> tuple[object, ...]:
-    """Every setup hypothesis: the five wrong wirings, the tracker tilt, the base mounting."""
-    return tuple(JetWiring(w) for w in WRONG_WIRINGS) + (TrackerTilt(), BaseSensorMounting())
+def setup_effects(base_sensor_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> tuple[object, ...]:
+    """Every setup hypothesis: the five wrong wirings, the tracker tilt, the base mounting
+    (turning about the base sensor's origin in the clamp frame, m: the profile's
+    ``base_sensor.offset_in_base_m``)."""
+    return tuple(JetWiring(w) for w in WRONG_WIRINGS) + (TrackerTilt(), BaseSensorMounting(base_sensor_offset_m))

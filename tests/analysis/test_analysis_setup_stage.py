@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from hydrojet_bench.analysis.diagnosis.engine import CandidateResult
+from hydrojet_bench.analysis.diagnosis.measurements import tip_sensor_offset_in_tip_m, tip_sensor_position_in_base_m
 from hydrojet_bench.analysis.diagnosis.setup import SetupFix, corrected_profile_text, with_setup_stage
 from hydrojet_bench.effects import load_effect
 from hydrojet_bench.effects.setup import BaseSensorMounting, JetWiring, TrackerTilt, tilt_rotation
@@ -32,26 +33,39 @@ def _twin_steps(setup: SetupErrors):
         window_s=None)
 
 
-def _model_angles_deg(steps, effect, values):
+def _model_errors(steps, effect, values):
+    """Per step: orientation error (deg) and tip sensor position error (mm) of the model."""
     model = make_model("cosserat", (load_effect("gravity"),) + ((effect,) if effect is not None else ()))
-    errors = []
+    measured_positions = tip_sensor_position_in_base_m(steps)
+    offset = np.array(tip_sensor_offset_in_tip_m(steps))
+    angles, distances = [], []
     for row in range(len(steps)):
         params = with_parameters(steps.model_parameters(row), values)
         solution = model.solve(steps.jet_forces_n[row], params)
-        errors.append(rotation_angle_deg(solution.tip_sensor_quaternion(), steps.tip_orientation_in_base()[row]))
-    return np.array(errors)
+        angles.append(rotation_angle_deg(solution.tip_sensor_quaternion(), steps.tip_orientation_in_base()[row]))
+        distances.append(1e3 * np.linalg.norm(solution.tip_sensor_position_in_base_sensor_m(offset)
+                                              - measured_positions[row]))
+    return np.array(angles), np.array(distances)
+
+
+_BASE_OFFSET_M = PROFILE.base_sensor.offset_in_body_m
 
 
 @pytest.mark.parametrize("setup, effect, values", [
     (SetupErrors(jet_wiring=(1, 3, 2)), JetWiring((1, 3, 2)), {}),
     (SetupErrors(jet_wiring=(2, 3, 1)), JetWiring((2, 3, 1)), {}),
-    (SetupErrors(base_sensor_rotvec_rad=(0.1, -0.05, 0.3)), BaseSensorMounting(),
+    # The sim profile's base sensor sits 14 mm off the rod axis: turning it moves the
+    # clamp origin read from it, which the hypothesis must carry to the positions too.
+    (SetupErrors(base_sensor_rotvec_rad=(0.1, -0.05, 0.3)), BaseSensorMounting(_BASE_OFFSET_M),
      {"base_sensor_mounting.rx_rad": 0.1, "base_sensor_mounting.ry_rad": -0.05, "base_sensor_mounting.rz_rad": 0.3}),
 ])
 def test_a_setup_hypothesis_at_the_true_value_reproduces_the_twin(setup, effect, values):
+    assert np.linalg.norm(_BASE_OFFSET_M) > 0.01
     steps = _twin_steps(setup)
-    assert np.max(_model_angles_deg(steps, None, {})) > 5.0  # the error is visible...
-    assert np.max(_model_angles_deg(steps, effect, values)) < 1e-3  # ...and the hypothesis explains it exactly
+    angles, distances = _model_errors(steps, None, {})
+    assert np.max(angles) > 5.0 and np.max(distances) > 2.0  # the error is visible...
+    angles, distances = _model_errors(steps, effect, values)
+    assert np.max(angles) < 1e-3 and np.max(distances) < 1e-3  # ...and the hypothesis explains it exactly
 
 
 def test_tracker_tilt_turns_gravity_and_nothing_else():

@@ -60,7 +60,7 @@ def hypotheses(problem: Problem, baseline: Fit) -> tuple[tuple, tuple]:
     of a correctly wired rig is tens of degrees off, and five fits of it would double
     diagnose's time)."""
     wirings, others = [], []
-    for effect in setup_effects():
+    for effect in setup_effects(problem.steps.profile.base_sensor.offset_in_body_m):
         if not isinstance(effect, JetWiring):
             others.append(effect)
             continue
