@@ -9,6 +9,9 @@ Each default leaves the model unchanged, like a library effect's.
   generator that is not level, or a wrong ``[gravity]``).
 * `BaseSensorMounting`: the base sensor turned in the clamp by a rotation vector; it turns
   the frame every measurement is expressed in, gravity included.
+* `JetForceSign`: every jet force reversed (the jets pull where the convention pushes).
+* `JetForceUnit`: every jet force scaled by a unit ratio (`FORCE_UNIT_MISTAKES`: the
+  valve calibration's forces in gf or mN, or multiplied by g, not in N).
 """
 
 from __future__ import annotations
@@ -136,8 +139,57 @@ WRONG_WIRINGS: tuple[tuple[int, int, int], ...] = tuple(
     w for w in itertools.permutations((1, 2, 3)) if w != (1, 2, 3))  # type: ignore[misc]
 
 
+class JetForceSign:
+    """Every jet pulls where the profile's convention has it push: each force reversed."""
+
+    name: ClassVar[str] = "jet_force_sign"
+    explanation: ClassVar[str] = (
+        "The jet forces act opposite to the profile's sign convention: each jet bends the tip "
+        "towards its own side instead of away from it, 180 degrees from where the model expects, "
+        "which no physical effect within its limits can mimic."
+    )
+    parameters: ClassVar[tuple[EffectParameter, ...]] = ()
+    uses_actuation: ClassVar[bool] = True
+
+    def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
+        problem.jet_forces_n = -problem.jet_forces_n
+
+
+G_N_PER_KGF = 9.80665
+# Valve calibration forces typed in another unit than N (see drivers.valve.calibration):
+# (name suffix, physical force / commanded force, the mistake). A table whose numbers
+# are c times the true newtons makes the jets push 1/c times the command. Mistakes the
+# other way (kilogram-force entered as N) are not listed: the valves clip every command
+# past the table's end, so the rig plays its full force at nearly every step.
+FORCE_UNIT_MISTAKES: tuple[tuple[str, float, str], ...] = (
+    ("times_g", 1.0 / G_N_PER_KGF, "newtons multiplied by g as if they were kilograms"),
+    ("gf", G_N_PER_KGF / 1000.0, "gram-force (a scale's g) entered as N"),
+    ("mn", 1e-3, "millinewtons entered as N"),
+)
+
+
+class JetForceUnit:
+    """Every jet produces ``ratio`` times the commanded force: the valve calibration's
+    forces in another unit than N (one of `FORCE_UNIT_MISTAKES`)."""
+
+    parameters: ClassVar[tuple[EffectParameter, ...]] = ()
+    uses_actuation: ClassVar[bool] = True
+
+    def __init__(self, unit: str, ratio: float, mistake: str) -> None:
+        self.unit, self.ratio, self.mistake = unit, float(ratio), mistake
+        self.name = f"jet_force_unit_{unit}"
+        self.explanation = (f"The jets push {self.ratio:.4g} times the force commanded: the valve calibration's "
+                            f"forces look like {mistake}. Every bend then scales alike, with gravity's share "
+                            "unchanged, which a stiffness within its bounds cannot mimic.")
+
+    def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
+        problem.jet_forces_n = self.ratio * problem.jet_forces_n
+
+
 def setup_effects(base_sensor_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> tuple[object, ...]:
-    """Every setup hypothesis: the five wrong wirings, the tracker tilt, the base mounting
-    (turning about the base sensor's origin in the clamp frame, m: the profile's
-    ``base_sensor.offset_in_base_m``)."""
-    return tuple(JetWiring(w) for w in WRONG_WIRINGS) + (TrackerTilt(), BaseSensorMounting(base_sensor_offset_m))
+    """Every setup hypothesis: the five wrong wirings, the reversed force sign, the force
+    unit mistakes, the tracker tilt, the base mounting (turning about the base sensor's
+    origin in the clamp frame, m: the profile's ``base_sensor.offset_in_base_m``)."""
+    return (tuple(JetWiring(w) for w in WRONG_WIRINGS) + (JetForceSign(),)
+            + tuple(JetForceUnit(*mistake) for mistake in FORCE_UNIT_MISTAKES)
+            + (TrackerTilt(), BaseSensorMounting(base_sensor_offset_m)))

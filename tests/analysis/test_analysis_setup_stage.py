@@ -5,16 +5,17 @@ from __future__ import annotations
 
 from dataclasses import make_dataclass, replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from hydrojet_bench.analysis.diagnosis.engine import CandidateResult
+from hydrojet_bench.analysis.diagnosis.engine import CandidateResult, _significantly_worse
 from hydrojet_bench.analysis.diagnosis.measurements import tip_sensor_offset_in_tip_m, tip_sensor_position_in_base_m
 from hydrojet_bench.analysis.diagnosis.setup import SetupFix, corrected_profile_text, with_setup_stage
 from hydrojet_bench.effects import load_effect
 from hydrojet_bench.effects.setup import BaseSensorMounting, JetWiring, TrackerTilt, tilt_rotation
-from hydrojet_bench.geometry import rotation_angle_deg
+from hydrojet_bench.geometry import quat_from_rotvec, quat_multiply, rotation_angle_deg
 from hydrojet_bench.models import make_model
 from hydrojet_bench.params import with_parameters
 from hydrojet_bench.plans import calibration_plan
@@ -87,35 +88,74 @@ def _candidate(name, score, qualifies=True, parameters=None):
                            {}, None, 0.0, 0.0, 10)
 
 
-def _diagnosis(ranking, verdict):
+HELD_OUT_ROWS = np.arange(40) % len(PLAN)  # rows may repeat: only their errors matter here
+
+
+def _diagnosis(steps, ranking, verdict, errors_deg):
     """A stand-in with the fields with_setup_stage reads and replaces (a full Diagnosis
-    takes a minute of fitting)."""
+    takes a minute of fitting); each candidate's fit predicts the held-out steps off by
+    ``errors_deg[name]`` (deg, per held-out row)."""
+    measured = steps.tip_orientation_in_base()[HELD_OUT_ROWS]
+    fits = {}
+    for name, errors in errors_deg.items():
+        turned = quat_multiply(measured, quat_from_rotvec(np.outer(np.radians(errors), [1.0, 0.0, 0.0])))
+        fits[name] = SimpleNamespace(predictions=SimpleNamespace(tip_orientation_in_base=_Rows(turned)))
     cls = make_dataclass("D", [("verdict", str), ("explanation", str), ("ranking", tuple), ("alternatives", tuple),
                                ("remaining_excess", bool), ("at_floor_threshold_deg", float),
-                               ("setup_ranking", tuple), ("verdict_kind", str), ("setup_fix", object)], frozen=True)
-    return cls(verdict, "", tuple(ranking), (), False, 0.25, (), "", None)
+                               ("setup_ranking", tuple), ("verdict_kind", str), ("setup_fix", object),
+                               ("held_out_rows", np.ndarray), ("candidate_fits", dict)], frozen=True)
+    return cls(verdict, "", tuple(ranking), (), False, 0.25, (), "", None, HELD_OUT_ROWS, fits)
 
 
-def test_setup_goes_first_and_a_tied_physical_effect_is_listed():
+class _Rows:
+    """Predictions of the held-out rows, indexed by HELD_OUT_ROWS as a whole."""
+
+    def __init__(self, rows):
+        self.rows = rows
+
+    def __getitem__(self, index):
+        assert index is HELD_OUT_ROWS
+        return self.rows
+
+
+def _worse(errors, best):
+    return _significantly_worse(errors, best, 0.01)
+
+
+def _errors(rms_deg, seed):
+    return np.abs(np.random.default_rng(seed).normal(0.0, rms_deg, len(HELD_OUT_ROWS)))
+
+
+def test_setup_goes_first_unless_physics_is_significantly_better_held_out():
     steps = _twin_steps(SetupErrors())
-    ranking = [_candidate("jet_misalignment", 50.0), _candidate("jet_wiring_132", 55.0), _candidate("gravity", 80.0)]
-    result = with_setup_stage(_diagnosis(ranking, "jet_misalignment"), steps, 10.0)
+    # The physical effect scores 30 better (BIC) but predicts the held-out steps no better
+    # within noise: the setup error is checked first, the physics listed beside it.
+    ranking = [_candidate("jet_misalignment", 20.0), _candidate("jet_wiring_132", 50.0), _candidate("gravity", 80.0)]
+    errors = {"jet_misalignment": _errors(0.2, 1), "jet_wiring_132": _errors(0.2, 2), "gravity": _errors(3.0, 3)}
+    result = with_setup_stage(_diagnosis(steps, ranking, "jet_misalignment", errors), steps, _worse)
     assert (result.verdict_kind, result.verdict) == ("setup", "jet_wiring_132")
     assert result.alternatives == ("jet_misalignment",)
     assert result.setup_fix.action == "swap the valve cables of jets 2 and 3"
     assert "jet_misalignment explains the data as well; to tell them apart: fire each jet alone" in result.explanation
     assert [c.effect for c in result.ranking] == ["jet_misalignment", "gravity"]
     assert [c.effect for c in result.setup_ranking] == ["jet_wiring_132"]
+    # The same physics significantly better on the held-out steps takes the verdict, and
+    # the setup hypothesis, significantly worse, is no alternative.
+    errors["jet_misalignment"] = _errors(0.1, 1)
+    errors["jet_wiring_132"] = _errors(0.5, 2)
+    result = with_setup_stage(_diagnosis(steps, ranking, "jet_misalignment", errors), steps, _worse)
+    assert (result.verdict_kind, result.verdict, result.alternatives) == ("physics", "jet_misalignment", ())
 
 
-def test_physics_far_better_than_any_setup_hypothesis_keeps_the_verdict():
+def test_physics_significantly_better_than_any_setup_hypothesis_keeps_the_verdict():
     steps = _twin_steps(SetupErrors())
     ranking = [_candidate("gravity", 10.0), _candidate("tracker_tilt", 40.0, parameters={
         "tracker_tilt.about_u_rad": (0.01, 0.001), "tracker_tilt.about_v_rad": (0.0, 0.001)})]
-    result = with_setup_stage(_diagnosis(ranking, "gravity"), steps, 10.0)
+    errors = {"gravity": _errors(0.2, 4), "tracker_tilt": _errors(0.6, 5)}
+    result = with_setup_stage(_diagnosis(steps, ranking, "gravity", errors), steps, _worse)
     assert (result.verdict_kind, result.verdict, result.setup_fix) == ("physics", "gravity", None)
-    unexplained = with_setup_stage(_diagnosis([_candidate("gravity", 10.0, qualifies=False)], "unexplained"), steps,
-                                   10.0)
+    unexplained = with_setup_stage(_diagnosis(steps, [_candidate("gravity", 10.0, qualifies=False)], "unexplained",
+                                              {}), steps, _worse)
     assert unexplained.verdict_kind == "unexplained"
 
 
