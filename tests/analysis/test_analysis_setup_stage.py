@@ -10,15 +10,17 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from hydrojet_bench.analysis.diagnosis import diagnose
 from hydrojet_bench.analysis.diagnosis.engine import CandidateResult, _significantly_worse
 from hydrojet_bench.analysis.diagnosis.measurements import tip_sensor_offset_in_tip_m, tip_sensor_position_in_base_m
 from hydrojet_bench.analysis.diagnosis.setup import SetupFix, corrected_profile_text, with_setup_stage
+from hydrojet_bench.config.schema import GravityTable
 from hydrojet_bench.effects import load_effect
 from hydrojet_bench.effects.setup import BaseSensorMounting, JetWiring, TrackerTilt, tilt_rotation
 from hydrojet_bench.geometry import quat_from_rotvec, quat_multiply, rotation_angle_deg
 from hydrojet_bench.models import make_model
 from hydrojet_bench.params import with_parameters
-from hydrojet_bench.plans import calibration_plan
+from hydrojet_bench.plans import calibration_plan, validation_sweeps
 from hydrojet_bench.profile import load_profile
 from hydrojet_bench.twin import DigitalTwin, SensorNoise, SetupErrors, TwinConfig
 
@@ -167,3 +169,50 @@ def test_the_fix_replaces_the_key_in_its_table_or_adds_it():
     mounting = SetupFix("base_sensor_mounting", "turn it", "base_sensor.rotation_in_base", (1.0, 0.0, 0.0, 0.0))
     assert corrected_profile_text(text, mounting).endswith("[base_sensor]\nrotation_in_base = [1.0, 0.0, 0.0, 0.0]  "
                                                            "# corrected by diagnose\n")
+
+
+# --- diagnose end to end on small plans ----------------------------------------------
+
+# Short enough for a unit test (60 steps, a few seconds per fit), with repeated sweeps
+# to hold out: the jets' full range, as the paper protocol.
+SHORT_PLAN = calibration_plan(16, seed=1) + validation_sweeps(0.15, steps_up=4, repetitions=2)
+HORIZONTAL = PROFILE.with_tables(gravity=GravityTable(in_tracker_m_s2=(9.81, 0.0, 0.0)))
+
+
+def _diagnose_twin(setup: SetupErrors, profile=PROFILE, seed=5, candidates=("sensor_mounting", "jet_misalignment")):
+    twin = DigitalTwin(TwinConfig.from_profile(profile, setup=setup, seed=seed))
+    steps = twin.run_plan(SHORT_PLAN).to_dataset(profile, f"twin seed {seed}").quasistatic_steps()
+    return diagnose(steps, "cosserat", candidates=tuple(load_effect(name) for name in candidates))
+
+
+def test_diagnose_names_a_turned_base_sensor_and_its_corrected_mounting():
+    # About the rod axis and across it; the base sensor 14 mm off the axis moves the clamp
+    # origin read from it by 2-3 mm, which the hypothesis must carry to the positions.
+    rotvec = (0.15, 0.0, 0.3)
+    found = _diagnose_twin(SetupErrors(base_sensor_rotvec_rad=rotvec))
+    floor = found.noise_floor_deg
+    assert found.baseline_heldout_rmse_deg > 3.0 * floor, "precondition: the error must show"
+    assert (found.verdict_kind, found.verdict) == ("setup", "base_sensor_mounting")
+    assert found.winner.heldout_orientation_rmse_deg <= 1.2 * floor
+    fix = found.setup_fix
+    assert fix.profile_key == "base_sensor.rotation_in_base"
+    truth = quat_multiply(quat_from_rotvec(np.array(rotvec)), np.array(PROFILE.base_sensor.rotation_in_body))
+    assert rotation_angle_deg(np.array(fix.corrected_value), truth) < 0.5
+
+
+@pytest.mark.parametrize("setup, profile, name, key", [
+    (SetupErrors(jet_force_sign=-1), PROFILE, "jet_force_sign", "jets.ring_angle_deg"),
+    # Lying horizontal, the rod's weight bends it as much as the jets: jets a tenth as
+    # strong are no stiffer rod there.
+    (SetupErrors(jet_force_scale=1.0 / 9.80665), HORIZONTAL, "jet_force_unit_times_g", None),
+])
+def test_diagnose_names_reversed_and_mis_scaled_jet_forces(setup, profile, name, key):
+    found = _diagnose_twin(setup, profile, candidates=("jet_gain",))
+    assert found.baseline_heldout_rmse_deg > 3.0 * found.noise_floor_deg, "precondition: the error must show"
+    assert (found.verdict_kind, found.verdict) == ("setup", name)
+    assert found.winner.heldout_orientation_rmse_deg <= 1.2 * found.noise_floor_deg
+    assert found.setup_fix.profile_key == key
+    if key is None:
+        assert "multiply them by 0.101972" in found.setup_fix.action
+    else:
+        assert found.setup_fix.corrected_value == -180.0  # the profile's ring at 0 deg, turned a half turn
