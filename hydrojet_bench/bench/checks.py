@@ -101,9 +101,9 @@ def check_wiring(measured_rad: np.ndarray, predicted_rad: np.ndarray,
     # Every jet bending the tip the opposite way to its own prediction (a wrong wiring
     # leaves a cosine of -0.5 at most): the forces' sign, not the cables.
     if np.all(np.diag(cosines) <= -(1.0 + settings.min_cosine) / 2.0):
-        return CheckResult(WIRING, "fail", "every jet bent the tip towards its own side, opposite to the model: the "
-                           "jet forces' sign is reversed (the jets pull); check which way the nozzles point, or the "
-                           "profile's jets.ring_angle_deg", values)
+        return CheckResult(WIRING, "fail", "every jet bent the tip the opposite way to the model's: the jet forces' "
+                           "sign is reversed (the jets pull where the profile has them push); check which way the "
+                           "nozzles point, or the profile's jets.ring_angle_deg", values)
     followed = [int(np.argmax(row)) + 1 if row.max() >= settings.min_cosine else 0 for row in cosines]
     values.update({f"cable{i + 1}_drives_jet": float(j) for i, j in enumerate(followed)})
     if followed == list(range(1, JET_COUNT + 1)):

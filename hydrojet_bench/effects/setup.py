@@ -144,8 +144,8 @@ class JetForceSign:
 
     name: ClassVar[str] = "jet_force_sign"
     explanation: ClassVar[str] = (
-        "The jet forces act opposite to the profile's sign convention: each jet bends the tip "
-        "towards its own side instead of away from it, 180 degrees from where the model expects, "
+        "The jet forces act opposite to the profile's sign convention (the jets pull where it "
+        "has them push): each jet bends the tip 180 degrees from where the model expects, "
         "which no physical effect within its limits can mimic."
     )
     parameters: ClassVar[tuple[EffectParameter, ...]] = ()
@@ -179,8 +179,9 @@ class JetForceUnit:
         self.unit, self.ratio, self.mistake = unit, float(ratio), mistake
         self.name = f"jet_force_unit_{unit}"
         self.explanation = (f"The jets push {self.ratio:.4g} times the force commanded: the valve calibration's "
-                            f"forces look like {mistake}. Every bend then scales alike, with gravity's share "
-                            "unchanged, which a stiffness within its bounds cannot mimic.")
+                            f"forces look like {mistake}. Every bend the jets make scales alike while the rod's "
+                            "weight stays: where gravity bends the rod (a tilted rig) no stiffness mimics that; "
+                            "on a hanging rod a stiffer rod does.")
 
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         problem.jet_forces_n = self.ratio * problem.jet_forces_n

@@ -86,7 +86,7 @@ def test_every_miswiring_is_caught_and_named(wiring):
 def test_reversed_jet_forces_are_named_not_taken_for_a_wiring():
     for seed, (tilt, rod) in enumerate(zip(TILTS_DEG, RODS * 2)):
         result = _check(tilt, rod, SensorNoise(), seed=seed, sign=-1)
-        assert result.failed and result.message.startswith("every jet bent the tip towards its own side"), result
+        assert result.failed and result.message.startswith("every jet bent the tip the opposite way to the model's"), result
 
 
 def test_a_dead_jet_is_named():

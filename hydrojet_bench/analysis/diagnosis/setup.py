@@ -119,7 +119,7 @@ def setup_fix(name: str, parameters: dict[str, tuple[float, float]], steps: Data
         # A half turn of the ring reverses every jet's (tip-plane) force exactly.
         ring = (profile.config.jets.ring_angle_deg + 180.0 + 180.0) % 360.0 - 180.0
         return SetupFix(name, "the jets pull where the profile's convention has them push: check which way the "
-                              "nozzles point (a jet bends the tip away from its own side), or set "
+                              "nozzles point, or set "
                               f"jets.ring_angle_deg = {ring:g} (a half turn of the ring reverses every jet)",
                         "jets.ring_angle_deg", round(ring, 6))
     unit = next((effect for effect in setup_effects() if isinstance(effect, JetForceUnit) and effect.name == name),
