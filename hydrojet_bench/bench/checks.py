@@ -5,7 +5,8 @@ rotation vector of R_fired R_rest^T, base frame) is compared with the bending th
 predicts for each jet. Jets sit 120 degrees apart, so the predicted directions of two
 different jets have a cosine near -0.5 and the right one near 1: the jet whose
 predicted direction the tip followed is the one the cable drives. Anything but
-(1, 2, 3) stops the session, with one line naming the jets.
+(1, 2, 3) stops the session, with one line naming the jets; every jet bending the tip
+against its own prediction names reversed jet forces instead.
 
 Level check: at rest the base IMU's accelerometer reads the specific force -g in its
 own frame; carried into the clamp frame by the profile's base mounting it is gravity as
@@ -97,6 +98,12 @@ def check_wiring(measured_rad: np.ndarray, predicted_rad: np.ndarray,
         jets = " and ".join(str(j) for j in still)
         return CheckResult(WIRING, "fail", f"jet {jets} did not move the tip (less than {settings.min_bend_deg:g} "
                            f"deg when fired alone at {settings.force_n:g} N): valve, cable or jet not working", values)
+    # Every jet bending the tip the opposite way to its own prediction (a wrong wiring
+    # leaves a cosine of -0.5 at most): the forces' sign, not the cables.
+    if np.all(np.diag(cosines) <= -(1.0 + settings.min_cosine) / 2.0):
+        return CheckResult(WIRING, "fail", "every jet bent the tip the opposite way to the model's: the jet forces' "
+                           "sign is reversed (the jets pull where the profile has them push); check which way the "
+                           "nozzles point, or the profile's jets.ring_angle_deg", values)
     followed = [int(np.argmax(row)) + 1 if row.max() >= settings.min_cosine else 0 for row in cosines]
     values.update({f"cable{i + 1}_drives_jet": float(j) for i, j in enumerate(followed)})
     if followed == list(range(1, JET_COUNT + 1)):

@@ -40,6 +40,7 @@ from .. import __version__
 from ..data.dataset import Dataset
 from ..errors import ConvergenceError, UserError
 from ..estimation.calibration import CalibrationResult, calibrate_dataset
+from ..estimation.setup_warnings import calibration_warnings
 from ..estimation.path import PathPredictor, StepPrediction
 from ..logs import LogWriter, floats
 from ..logs.topics import (Disturbance, EmFrame, EmTool, Event, ImuOrientation, ImuRaw, ModelPrediction,
@@ -148,6 +149,8 @@ class SessionResult:
     steps: Dataset | None
     stream_rates: tuple[StreamRateFigure, ...] = ()  # over the whole session, one per stream that ran
     checks: tuple[CheckResult, ...] = ()  # the setup checks' outcomes (none when skipped)
+    # What the calibration's numbers suggest about the setup (`estimation.setup_warnings`).
+    calibration_warnings: tuple[str, ...] = ()
 
 
 class Session:
@@ -164,6 +167,7 @@ class Session:
         self.imu = StepRecorder(profile, with_positions=False, source="imu")
         self.params = request.params
         self.calibration: CalibrationResult | None = None
+        self.calibration_warnings: tuple[str, ...] = ()
         self.estimation: PathPredictor | None = None
         self.estimates: list[StepPrediction] = []
         self.settled_rows: list[Dataset] = []
@@ -222,7 +226,8 @@ class Session:
         steps = Dataset.concatenate(self.settled_rows) if self.settled_rows else None
         return SessionResult(request.log_path, completed, len(request.plan), self.clock.now(),
                              time.monotonic() - started, self.params, self.calibration,
-                             tuple(self.estimates), steps, self._overall_rates, self.checks)
+                             tuple(self.estimates), steps, self._overall_rates, self.checks,
+                             self.calibration_warnings)
 
     def event(self, level: str, source: str, message: str) -> None:
         t_s = self.clock.now()
@@ -585,6 +590,9 @@ class Session:
         self.estimation = None  # restart estimation from the calibrated parameters
         self.event("info", "calibration", f"RMS orientation error {result.rms_orientation_deg_before:.2f} deg "
                    f"-> {result.rms_orientation_deg_after:.2f} deg")
+        self.calibration_warnings = tuple(calibration_warnings(request.model, result))
+        for warning in self.calibration_warnings:
+            self.event("warning", "calibration", warning)
         self._write_parameters()
 
     def _write_parameters(self) -> None:

@@ -20,8 +20,8 @@ from ..errors import UserError
 from ..files import make_folder_for
 from ..effects import CALIBRATION_POSES, SWEEPS, identifying_rows
 from ..estimation.calibration import (ALL_ROWS, DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_dataset,
-                                      fit_mask, parameter_bounds, rows_that_identify)
-from ..estimation.setup_warnings import setup_warnings
+                                      fit_mask, rows_that_identify)
+from ..estimation.setup_warnings import calibration_warnings
 from ..model_choice import COSSERAT, ModelChoice, model_choice
 from ..params_io import effect_specs, write_parameter_file
 from . import render
@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     console.print(table)
     console.print(f"RMS orientation error on the {_FITTED_ROWS[fit_on]}: {result.rms_orientation_deg_before:.2f} deg "
                   f"before, {result.rms_orientation_deg_after:.2f} deg after ({result.evaluations} evaluations)")
-    for warning in setup_warnings(result.names, tuple(result.values), lambda name: parameter_bounds(model, name)):
+    for warning in calibration_warnings(model, result):
         console.print(f"[yellow]warning:[/] {render.plain(warning)}")
     for first, second, correlation in result.unidentifiable:
         console.print(f"[yellow]warning:[/] {first} and {second} are not separately identifiable on these rows "

@@ -143,7 +143,7 @@ def _export_profile(console: Console, diagnosis: Diagnosis, profile, path: Path)
         return
     text = corrected_profile_text(profile.path.read_text(), fix)
     publish(path, "profile", lambda partial: partial.write_text(text))
-    console.print(f"wrote {render.plain(path)}: {fix.profile_key} = {list(fix.corrected_value)}")
+    console.print(f"wrote {render.plain(path)}: {fix.profile_key} = {fix.value_text()}")
 
 
 def _diagnose(args: argparse.Namespace, profile, steps, choice: ModelChoice, candidates,

@@ -224,6 +224,8 @@ def _print_outcome(console: Console, result, model_name: str, args: argparse.Nam
     if result.calibration is not None:
         console.print(f"calibration on the calibration poses: RMS {result.calibration.rms_orientation_deg_before:.2f} deg "
                       f"-> {result.calibration.rms_orientation_deg_after:.2f} deg")
+    for warning in result.calibration_warnings:
+        console.print(f"[yellow]warning:[/] {render.plain(warning)}")
     for rate in result.stream_rates:
         style = "yellow" if rate.below_warning else "dim"
         console.print(f"[{style}]{'warning: ' if rate.below_warning else ''}{rate.describe()}[/]", highlight=False)

@@ -49,9 +49,6 @@ def run(args: argparse.Namespace) -> int:
     setup = SetupErrors()
     for spec in setup_specs:
         setup = parse_setup_error(spec, setup)
-    if setup_specs and not setup.any:
-        raise UserError(f"--hidden {' '.join(setup_specs)}: that is the rig as the profile describes it and would "
-                        "hide nothing; give a wrong wiring, a tilt or a rotation")
     if setup.any:
         changes["setup"] = setup
     if physics_specs:

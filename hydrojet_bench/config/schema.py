@@ -420,10 +420,13 @@ class TwinTable(Table, kw_only=True):
     noise: SensorNoise = msgspec.field(default_factory=SensorNoise)
     # Setup errors the twin simulates (`twin.SetupErrors`): cable i drives jet
     # jet_wiring[i]; the field generator tilted about tracker x then y (deg); the base
-    # sensor turned in the clamp by this rotation vector (rad, clamp frame).
+    # sensor turned in the clamp by this rotation vector (rad, clamp frame); every jet
+    # force reversed (-1); every jet force scaled (the valve table in another unit).
     jet_wiring: tuple[int, int, int] = (1, 2, 3)
     tracker_tilt_deg: tuple[Finite, Finite] = (0.0, 0.0)
     base_sensor_rotvec_rad: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
+    jet_force_sign: int = 1
+    jet_force_scale: Positive = 1.0
 
 
 # --- the whole profile ---------------------------------------------------------------

@@ -13,7 +13,8 @@ work unchanged in both the Cosserat and the PRB model:
 * actuation map: jet gains and the jet-ring angle;
 * base boundary: a rotational clamp compliance, optionally with play (hysteresis), which
   makes the solve depend on the previous clamp rotation;
-* measurement: fixed mounting rotations of the base and tip sensors.
+* measurement: fixed mounting rotations of the base and tip sensors (and the base
+  sensor's origin, the lever arm of its mounting).
 """
 
 from __future__ import annotations
@@ -63,6 +64,9 @@ class RodProblem:
     # Measurement: sensor orientation = body orientation @ mounting rotation.
     base_sensor_mounting: np.ndarray = field(default_factory=lambda: np.eye(3))
     tip_sensor_mounting: np.ndarray = field(default_factory=lambda: np.eye(3))
+    # The base sensor's origin in the clamp frame (m): the point a base_sensor_mounting
+    # turns the sensor about, so the clamp origin read from the sensor moves with it.
+    base_sensor_offset_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self) -> None:
         samples = len(self.arc_length_m)

@@ -9,6 +9,9 @@ Each default leaves the model unchanged, like a library effect's.
   generator that is not level, or a wrong ``[gravity]``).
 * `BaseSensorMounting`: the base sensor turned in the clamp by a rotation vector; it turns
   the frame every measurement is expressed in, gravity included.
+* `JetForceSign`: every jet force reversed (the jets pull where the convention pushes).
+* `JetForceUnit`: every jet force scaled by a unit ratio (`FORCE_UNIT_MISTAKES`: the
+  valve calibration's forces in gf or mN, or multiplied by g, not in N).
 """
 
 from __future__ import annotations
@@ -80,8 +83,11 @@ class TrackerTilt:
 
 
 class BaseSensorMounting:
-    """The measured clamp frame is the true one turned by exp(r): the tip orientation in
-    the base frame reads exp(r)^T R_tip and gravity from the base pose reads exp(r)^T g."""
+    """The measured clamp frame is the true one turned by M = exp(r) about the base
+    sensor's origin o (``sensor_offset_in_clamp_m``, the profile's
+    ``base_sensor.offset_in_base_m``): the tip orientation in the base frame reads
+    M^T R_tip, a tip position reads M^T (p - o) + o, and gravity from the base pose
+    reads M^T g."""
 
     name: ClassVar[str] = "base_sensor_mounting"
     explanation: ClassVar[str] = (
@@ -98,10 +104,14 @@ class BaseSensorMounting:
     )
     uses_actuation: ClassVar[bool] = False
 
+    def __init__(self, sensor_offset_in_clamp_m: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        self.sensor_offset_in_clamp_m = np.array(sensor_offset_in_clamp_m, dtype=float)
+
     def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
         rotation = so3_exp([values["rx_rad"], values["ry_rad"], values["rz_rad"]])
         rotate_gravity_load(problem, rotation)
         problem.base_sensor_mounting = problem.base_sensor_mounting @ rotation
+        problem.base_sensor_offset_m = self.sensor_offset_in_clamp_m
 
 
 class JetWiring:
@@ -129,6 +139,58 @@ WRONG_WIRINGS: tuple[tuple[int, int, int], ...] = tuple(
     w for w in itertools.permutations((1, 2, 3)) if w != (1, 2, 3))  # type: ignore[misc]
 
 
-def setup_effects() -> tuple[object, ...]:
-    """Every setup hypothesis: the five wrong wirings, the tracker tilt, the base mounting."""
-    return tuple(JetWiring(w) for w in WRONG_WIRINGS) + (TrackerTilt(), BaseSensorMounting())
+class JetForceSign:
+    """Every jet pulls where the profile's convention has it push: each force reversed."""
+
+    name: ClassVar[str] = "jet_force_sign"
+    explanation: ClassVar[str] = (
+        "The jet forces act opposite to the profile's sign convention (the jets pull where it "
+        "has them push): each jet bends the tip 180 degrees from where the model expects, "
+        "which no physical effect within its limits can mimic."
+    )
+    parameters: ClassVar[tuple[EffectParameter, ...]] = ()
+    uses_actuation: ClassVar[bool] = True
+
+    def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
+        problem.jet_forces_n = -problem.jet_forces_n
+
+
+G_N_PER_KGF = 9.80665
+# Valve calibration forces typed in another unit than N (see drivers.valve.calibration):
+# (name suffix, physical force / commanded force, the mistake). A table whose numbers
+# are c times the true newtons makes the jets push 1/c times the command. Mistakes the
+# other way (kilogram-force entered as N) are not listed: the valves clip every command
+# past the table's end, so the rig plays its full force at nearly every step.
+FORCE_UNIT_MISTAKES: tuple[tuple[str, float, str], ...] = (
+    ("times_g", 1.0 / G_N_PER_KGF, "newtons multiplied by g as if they were kilograms"),
+    ("gf", G_N_PER_KGF / 1000.0, "gram-force (a scale's g) entered as N"),
+    ("mn", 1e-3, "millinewtons entered as N"),
+)
+
+
+class JetForceUnit:
+    """Every jet produces ``ratio`` times the commanded force: the valve calibration's
+    forces in another unit than N (one of `FORCE_UNIT_MISTAKES`)."""
+
+    parameters: ClassVar[tuple[EffectParameter, ...]] = ()
+    uses_actuation: ClassVar[bool] = True
+
+    def __init__(self, unit: str, ratio: float, mistake: str) -> None:
+        self.unit, self.ratio, self.mistake = unit, float(ratio), mistake
+        self.name = f"jet_force_unit_{unit}"
+        self.explanation = (f"The jets push {self.ratio:.4g} times the force commanded: the valve calibration's "
+                            f"forces look like {mistake}. Every bend the jets make scales alike while the rod's "
+                            "weight stays: where gravity bends the rod (a tilted rig) no stiffness mimics that; "
+                            "on a hanging rod a stiffer rod does.")
+
+    def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
+        problem.jet_forces_n = self.ratio * problem.jet_forces_n
+
+
+def setup_effects(base_sensor_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> tuple[object, ...]:
+    """Every setup hypothesis: the five wrong wirings, the reversed force sign, the force
+    unit mistakes, the tracker tilt, the base mounting (turning about the base sensor's
+    origin in the clamp frame, m: the profile's ``base_sensor.offset_in_base_m``)."""
+    return (tuple(JetWiring(w) for w in WRONG_WIRINGS) + (JetForceSign(),)
+            + tuple(JetForceUnit(*mistake) for mistake in FORCE_UNIT_MISTAKES)
+            + (TrackerTilt(), BaseSensorMounting(base_sensor_offset_m)))

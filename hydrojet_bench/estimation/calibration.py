@@ -177,8 +177,7 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         predicted = np.array([solution.tip_sensor_in_base_sensor() for solution in solutions])
         rows[:, :3] = body_rotation_error(predicted, measured)
         if measured_positions is not None:
-            positions = np.array([s.base_sensor_mounting.T @ (s.tip_position_in_base_m + s.tip_rotation_in_base @ o)
-                                  for s, o in zip(solutions, offsets)])
+            positions = np.array([s.tip_sensor_position_in_base_sensor_m(o) for s, o in zip(solutions, offsets)])
             rows[:, 3:] = position_weight_rad_per_m * (positions - measured_positions)
         return rows
 

@@ -11,6 +11,9 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
+from ..models.shooting import ShootingModel
+from .calibration import CalibrationResult, parameter_bounds
+
 # A modulus within this share of its (logarithmic) range from a bound sits on it.
 ON_BOUND_SHARE = 0.02
 # A weight outside this range is no longer water in the lumens or glue on the capsule.
@@ -43,3 +46,9 @@ def setup_warnings(names: tuple[str, ...], values: tuple[float, ...],
                 warnings.append(f"{name} = {fitted[name]:.4g} Pa sits on its bound: the jet forces may be in the "
                                 "wrong unit, or the jets miswired; diagnose names setup errors")
     return warnings
+
+
+def calibration_warnings(model: ShootingModel, result: CalibrationResult) -> list[str]:
+    """`setup_warnings` of ``model``'s calibration ``result`` (what `calibrate` and a
+    session's own calibration show)."""
+    return setup_warnings(result.names, tuple(result.values), lambda name: parameter_bounds(model, name))

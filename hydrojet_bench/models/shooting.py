@@ -53,6 +53,9 @@ class Solution:
     base_wrench_in_base: internal force (N) and moment (N m) at the clamp, base frame.
     base_rotation_vector_rad: how far the clamp itself rotated (nonzero only with a
         compliant clamp); the path state a hysteretic clamp carries to the next solve.
+    base_sensor_mounting, tip_sensor_mounting: the mounting rotations effects added
+        (sensor orientation = body orientation @ mounting); base_sensor_offset_m: the
+        base sensor's origin in the clamp frame, m (`RodProblem.base_sensor_offset_m`).
     """
 
     model: str
@@ -68,6 +71,7 @@ class Solution:
     residual: float
     # Solver state for warm starts: Jacobian of the clamp residual w.r.t. the tip rotation.
     jacobian: np.ndarray = field(repr=False)
+    base_sensor_offset_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @property
     def tip_position_in_base_m(self) -> np.ndarray:
@@ -94,6 +98,16 @@ class Solution:
         sensor sits on the fixed holder (the base frame), not on the rod: a compliant
         clamp turns the rod relative to it, which is how such a clamp shows up."""
         return self.base_sensor_mounting.T @ self.tip_rotation_in_base @ self.tip_sensor_mounting
+
+    def tip_sensor_position_in_base_sensor_m(self, offset_in_tip_m: np.ndarray) -> np.ndarray:
+        """Where a tip sensor at ``offset_in_tip_m`` (tip frame, m) is read in the base
+        frame the base sensor's pose gives (m): what a tracker's two positions measure.
+
+        An unstated base mounting M turns the base sensor about its own origin o (clamp
+        frame), so the clamp frame read through the profile's mounting is the true one
+        turned by M about o: a point p of the true base frame reads M^T (p - o) + o."""
+        point = self.tip_position_in_base_m + self.tip_rotation_in_base @ np.asarray(offset_in_tip_m, dtype=float)
+        return self.base_sensor_mounting.T @ (point - self.base_sensor_offset_m) + self.base_sensor_offset_m
 
     def tip_sensor_quaternion(self) -> np.ndarray:
         """`tip_sensor_in_base_sensor` as a quaternion (w, x, y, z)."""
@@ -344,6 +358,7 @@ class ShootingModel:
             self.name, prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].copy(), prepared.node_arc_length_m,
             positions, rotations, base_wrench, clamp_rotation, problem.base_sensor_mounting,
             problem.tip_sensor_mounting, int(work.info[1]), float(work.info[2]), jacobian,
+            problem.base_sensor_offset_m,
         )
 
 

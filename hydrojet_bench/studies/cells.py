@@ -81,10 +81,12 @@ def expand(study: Study) -> tuple[Cell, ...]:
     for (kind, effects, values, parameter, size, default, unit, *setup), profile, orientation, plan, model, noise, seed in itertools.product(
             scenarios, study.profiles, study.orientations, study.plans, study.models, study.noise_scales,
             study.seeds):
+        if setup and setup[0][2] and orientation not in setup[0][2]:
+            continue  # a setup error only on the orientations its [[setup]] names
         cells.append(Cell(profile=profile, orientation=orientation, plan=plan, model=model, seed=seed,
                           noise_scale=noise, kind=kind,
                           truth=setup[0][0] if setup else "+".join(names[s] for s in effects) or NONE,
                           effects=effects, values=values, parameter=parameter, size=size,
-                          size_default=default, unit=unit, setup=setup[0] if setup else None))
+                          size_default=default, unit=unit, setup=setup[0][:2] if setup else None))
     return tuple(cells)
 

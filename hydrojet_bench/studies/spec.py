@@ -22,8 +22,9 @@
     values = {"jet_gain.gain_1" = 0.8, "base_compliance.compliance_rad_per_nm" = 20.0}
 
     [[setup]]                         # a setup error (`twin.SETUP_ERRORS`), physics nominal
-    error = "tracker_tilt_deg"        # jet_wiring, tracker_tilt_deg or base_sensor_rotvec
+    error = "tracker_tilt_deg"        # jet_wiring, tracker_tilt_deg, base_sensor_rotvec, jet_force_sign, jet_force_scale
     sizes = [[2.0, 1.0], [6.0, -3.0]] # each size: the error's values (as simulate --hidden)
+    orientations = ["horizontal"]     # optional: only these of the study's orientations
 
 Every size is checked against the effect parameter's bounds; a mistake is a
 `UserError` naming the file and the dotted key.
@@ -77,6 +78,7 @@ class EffectPair(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
 class SetupSweep(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     error: str
     sizes: Annotated[list[list[float]], msgspec.Meta(min_length=1)]
+    orientations: list[Orientation] = []  # the rig orientations it is simulated on (default: the study's)
 
 
 class StudySpec(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
@@ -111,7 +113,8 @@ class Study(msgspec.Struct, frozen=True):
     none: bool
     sweeps: tuple[tuple[str, str, tuple[float, ...], float, str, tuple[tuple[str, float], ...]], ...]
     pairs: tuple[tuple[tuple[str, ...], tuple[tuple[str, float], ...]], ...]
-    setups: tuple[tuple[str, tuple[float, ...]], ...] = ()  # (SETUP_ERRORS name, values)
+    # (SETUP_ERRORS name, values, orientations: empty for the study's)
+    setups: tuple[tuple[str, tuple[float, ...], tuple[str, ...]], ...] = ()
 
 
 def load_study(path: Path) -> Study:
@@ -156,12 +159,16 @@ def load_study(path: Path) -> Study:
         pairs.append((specs, tuple(sorted(pair.values.items()))))
     setups = []
     for index, sweep in enumerate(spec.setup):
+        for number, orientation in enumerate(sweep.orientations):
+            if orientation not in spec.orientations:
+                raise UserError(f"{source}: setup[{index}].orientations[{number}] = {orientation!r} is not among the "
+                                f"study's orientations ({', '.join(spec.orientations)})")
         for number, size in enumerate(sweep.sizes):
             try:
                 parse_setup_error(setup_error_text(sweep.error, tuple(size)))
             except UserError as error:
                 raise UserError(f"{source}: setup[{index}].sizes[{number}]: {error}") from None
-            setups.append((sweep.error, tuple(size)))
+            setups.append((sweep.error, tuple(size), tuple(sweep.orientations)))
     return Study(name=spec.name or path.stem, source=source, profiles=profiles,
                  orientations=tuple(spec.orientations), plans=plans, models=tuple(spec.models),
                  seeds=tuple(spec.seeds), noise_scales=tuple(spec.noise_scales), none=spec.none,

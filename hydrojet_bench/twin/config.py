@@ -260,10 +260,11 @@ class TwinConfig:
         except UserError as error:
             raise UserError(f"{profile.source}: twin.hidden_effects: {error}") from None
         try:
-            setup = SetupErrors(table.jet_wiring, table.tracker_tilt_deg, table.base_sensor_rotvec_rad)
-        except ValueError:
-            raise UserError(f"{profile.source}: twin.jet_wiring must be a permutation of 1, 2, 3, "
-                            f"got {list(table.jet_wiring)}") from None
+            setup = SetupErrors(table.jet_wiring, table.tracker_tilt_deg, table.base_sensor_rotvec_rad,
+                                table.jet_force_sign, table.jet_force_scale)
+        except ValueError as error:
+            # SetupErrors names its fields as the [twin] table does.
+            raise UserError(f"{profile.source}: {str(error).replace('SetupErrors.', 'twin.')}") from None
         values: dict[str, object] = {
             "true_params": true_params,
             "gravity_in_tracker_m_s2": profile.gravity_in_tracker_m_s2,

@@ -9,7 +9,15 @@
   frame is the profile's turned about the tracker's x axis, then its y axis, by these
   angles (degrees);
 * ``base_sensor_rotvec_rad``: the base sensor sits in the clamp turned by this rotation
-  vector (rad, clamp frame) on top of the mounting the profile states.
+  vector (rad, clamp frame) on top of the mounting the profile states;
+* ``jet_force_sign``: -1 when every jet pulls where the profile's convention has it
+  push (the force reversed);
+* ``jet_force_scale``: every jet produces this multiple of the force commanded (the
+  valve calibration's forces in another unit than N: 1/9.80665 for newtons multiplied
+  by g as if they were kilograms, 9.80665e-3 for gram-force read as N).
+
+Each physical jet force is sign x scale x the commanded force of the jet its cable
+reaches.
 
 `SETUP_ERRORS` maps the names ``simulate --hidden NAME=VALUE`` accepts to the field each
 sets, and `parse_setup_error` reads one such value (a user mistake is a `UserError`).
@@ -36,8 +44,17 @@ class SetupErrors:
     jet_wiring: tuple[int, int, int] = CORRECT_WIRING
     tracker_tilt_deg: tuple[float, float] = (0.0, 0.0)
     base_sensor_rotvec_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    jet_force_sign: int = 1
+    jet_force_scale: float = 1.0
 
     def __post_init__(self) -> None:
+        if self.jet_force_sign not in (1, -1) or isinstance(self.jet_force_sign, bool):
+            raise ValueError(f"SetupErrors.jet_force_sign must be 1 or -1, got {self.jet_force_sign!r}")
+        object.__setattr__(self, "jet_force_sign", int(self.jet_force_sign))
+        scale = float(self.jet_force_scale)
+        if not (math.isfinite(scale) and scale > 0.0):
+            raise ValueError(f"SetupErrors.jet_force_scale must be a finite number > 0, got {self.jet_force_scale!r}")
+        object.__setattr__(self, "jet_force_scale", scale)
         wiring = tuple(self.jet_wiring)
         if sorted(wiring) != list(CORRECT_WIRING) or any(isinstance(j, bool) for j in wiring):
             raise ValueError(f"SetupErrors.jet_wiring must be a permutation of 1, 2, 3, got {self.jet_wiring!r}")
@@ -55,7 +72,7 @@ class SetupErrors:
     def physical_jet_forces_n(self, commanded_n: np.ndarray) -> np.ndarray:
         """The forces (N) the physical jets 1..3 produce for forces commanded per cable."""
         physical = np.empty(JET_COUNT)
-        physical[np.array(self.jet_wiring) - 1] = commanded_n
+        physical[np.array(self.jet_wiring) - 1] = self.jet_force_sign * self.jet_force_scale * np.asarray(commanded_n)
         return physical
 
     def tilt_rotation(self) -> np.ndarray:
@@ -74,6 +91,8 @@ SETUP_ERRORS: dict[str, tuple[str, int]] = {
     "jet_wiring": ("jet_wiring", JET_COUNT),
     "tracker_tilt_deg": ("tracker_tilt_deg", 2),
     "base_sensor_rotvec": ("base_sensor_rotvec_rad", 3),
+    "jet_force_sign": ("jet_force_sign", 1),
+    "jet_force_scale": ("jet_force_scale", 1),
 }
 
 
@@ -88,17 +107,25 @@ def parse_setup_error(text: str, errors: SetupErrors = SetupErrors()) -> SetupEr
     if not equals or name not in SETUP_ERRORS:
         raise UserError(f"setup error {text!r}: a setup error is NAME=VALUES with NAME one of {', '.join(SETUP_ERRORS)}")
     field_name, size = SETUP_ERRORS[name]
+    wanted = "one number" if size == 1 else f"{size} comma-separated numbers"
     try:
         numbers = tuple(float(v) for v in values.split(","))
     except ValueError:
-        raise UserError(f"setup error {text!r}: {name} takes {size} comma-separated numbers") from None
+        raise UserError(f"setup error {text!r}: {name} takes {wanted}") from None
     if len(numbers) != size:
-        raise UserError(f"setup error {text!r}: {name} takes {size} comma-separated numbers, got {len(numbers)}")
-    if field_name == "jet_wiring":
-        numbers = tuple(int(v) for v in numbers)  # type: ignore[assignment]
+        raise UserError(f"setup error {text!r}: {name} takes {wanted}, got {len(numbers)}")
+    value: object = numbers[0] if size == 1 else numbers
+    if field_name in ("jet_wiring", "jet_force_sign"):
+        if not all(v == int(v) for v in numbers):
+            raise UserError(f"setup error {text!r}: {name} takes integers")
+        value = int(numbers[0]) if size == 1 else tuple(int(v) for v in numbers)
     changes = {f.name: getattr(errors, f.name) for f in fields(SetupErrors)}
-    changes[field_name] = numbers
+    changes[field_name] = value
     try:
-        return SetupErrors(**changes)  # type: ignore[arg-type]
+        result = SetupErrors(**changes)  # type: ignore[arg-type]
     except ValueError as error:
         raise UserError(f"setup error {text!r}: {error}") from None
+    if getattr(result, field_name) == getattr(SetupErrors(), field_name):
+        raise UserError(f"setup error {text!r}: that is the rig as the profile describes it and would hide "
+                        f"nothing; give {name} another value")
+    return result

@@ -214,3 +214,22 @@ def test_log_is_written_in_time_order(finished_session):
     assert len(chunks) > 1
     for earlier, later in zip(chunks, chunks[1:]):
         assert earlier.message_end_time <= later.message_start_time
+
+
+def test_the_sessions_own_calibration_shows_and_logs_a_setup_warning(tmp_path):
+    """Jet forces in mN read as N (the twin's jets push a thousandth of the command): the
+    rod hardly bends, the calibration puts its stiffness on the bound, and the session
+    says what that smells of, in its result and its log, as `calibrate` does."""
+    profile = load_profile("sim")
+    profile = profile.with_tables(twin=replace(profile.config.twin, jet_force_scale=1e-3))
+    log_path = tmp_path / "unit.mcap"
+    request = make_request(log_path, plan=calibration_plan(12, settle_s=SETTLE_S, seed=2), profile=profile,
+                           setup_checks=False)
+    result = asyncio.run(run_without_leaks(Session(dataclasses.replace(
+        request, settings=replace(request.settings, twin=profile.config.twin)))))
+    assert result.calibration is not None
+    bound = [w for w in result.calibration_warnings if "sits on its bound: the jet forces may be in the wrong unit" in w]
+    assert bound, result.calibration_warnings
+    logged = [m.message for m in read_log(log_path, topics=["/events"]).messages
+              if m.level == "warning" and m.source == "calibration"]
+    assert logged == list(result.calibration_warnings)

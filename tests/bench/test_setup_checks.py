@@ -42,11 +42,11 @@ def _true_params(rod: dict[str, float]):
     return with_parameters(nominal, {name: factor * scales[name] for name, factor in rod.items()})
 
 
-def _check(tilt_deg, rod, noise, seed, wiring=(1, 2, 3)):
+def _check(tilt_deg, rod, noise, seed, wiring=(1, 2, 3), sign=1):
     """Play the wiring check on a twin, as the session does: rest, each jet alone."""
     twin = DigitalTwin(TwinConfig.from_profile(
         PROFILE, base_orientation_in_tracker=_base_orientation(tilt_deg), true_params=_true_params(rod),
-        noise=noise, seed=seed, setup=SetupErrors(jet_wiring=wiring)))
+        noise=noise, seed=seed, setup=SetupErrors(jet_wiring=wiring, jet_force_sign=sign)))
     commands = [(0.0, 0.0, 0.0)] + [tuple(SETTINGS.force_n * (jet == k) for k in range(3)) for jet in range(3)]
     settled = []
     for forces in commands:
@@ -81,6 +81,12 @@ def test_every_miswiring_is_caught_and_named(wiring):
         else:
             assert result.message.startswith("jets wired one position round")
             assert f"jet 1 towards jet {wiring[0]}" in result.message
+
+
+def test_reversed_jet_forces_are_named_not_taken_for_a_wiring():
+    for seed, (tilt, rod) in enumerate(zip(TILTS_DEG, RODS * 2)):
+        result = _check(tilt, rod, SensorNoise(), seed=seed, sign=-1)
+        assert result.failed and result.message.startswith("every jet bent the tip the opposite way to the model's"), result
 
 
 def test_a_dead_jet_is_named():

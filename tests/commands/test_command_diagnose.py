@@ -14,7 +14,7 @@ from hydrojet_bench.params import PARAMETER_NAMES
 from hydrojet_bench.params_io import read_parameter_file
 from hydrojet_bench.plans import calibration_plan, validation_sweeps
 from hydrojet_bench.profile import load_profile
-from hydrojet_bench.twin import DigitalTwin, TwinConfig
+from hydrojet_bench.twin import DigitalTwin, SetupErrors, TwinConfig
 
 
 @pytest.fixture(scope="module")
@@ -115,3 +115,25 @@ def test_export_writes_the_verdicts_calibrated_parameters_and_never_overwrites(r
     before = exported.read_text()
     assert main(["diagnose", str(recorded), "--candidate", "jet_gain", "--export", str(exported)]) == 2
     assert str(exported) in capsys.readouterr().err and exported.read_text() == before
+
+
+def test_a_turned_base_sensor_gets_a_corrected_profile_that_leaves_nothing_to_explain(tmp_path, capsys):
+    """The corrected profile --export-profile writes, used on the same recording, leaves
+    the model at the noise floor: verdict none."""
+    profile = load_profile("sim")
+    twin = DigitalTwin(TwinConfig.from_profile(profile, setup=SetupErrors(base_sensor_rotvec_rad=(0.0, 0.0, 0.1)),
+                                               seed=6))
+    plan = calibration_plan(16, seed=1) + validation_sweeps(0.15, steps_up=4, repetitions=2)
+    recording, fixed, first, second = (tmp_path / name for name in ("turned.csv", "fixed.toml", "1.json", "2.json"))
+    write_csv(twin.run_plan(plan).to_dataset(profile, "turned base sensor"), recording)
+    assert main(["diagnose", str(recording), "--candidate", "sensor_mounting", "--json", str(first),
+                 "--export-profile", str(fixed)]) == 0
+    document = json.loads(first.read_text())
+    assert (document["verdict_kind"], document["verdict"]) == ("setup", "base_sensor_mounting")
+    assert document["setup"]["fix"]["profile_key"] == "base_sensor.rotation_in_base"
+    assert "base_sensor.rotation_in_base = [" in " ".join(capsys.readouterr().out.split())
+    assert main(["diagnose", str(recording), "--profile", str(fixed), "--candidate", "sensor_mounting",
+                 "--json", str(second)]) == 0
+    again = json.loads(second.read_text())
+    assert (again["verdict_kind"], again["verdict"]) == ("none", "none")
+    assert again["baseline"]["heldout_orientation_rmse_deg"] <= 1.2 * again["noise_floor_deg"]

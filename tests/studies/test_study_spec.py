@@ -31,6 +31,8 @@ from hydrojet_bench.studies.spec import load_study
     ('[[setup]]\nerror = "jet_wiring"\nsizes = [[1, 1, 2]]\n',
      "setup[0].sizes[0]: setup error 'jet_wiring=1,1,2': SetupErrors.jet_wiring must be a permutation"),
     ('[[setup]]\nerror = "tracker_tilt"\nsizes = [[1.0, 2.0]]\n', "setup[0].sizes[0]: setup error 'tracker_tilt=1,2'"),
+    ('[[setup]]\nerror = "jet_force_sign"\nsizes = [[-1]]\norientations = ["horizontal"]\n',
+     "setup[0].orientations[0] = 'horizontal' is not among the study's orientations (hanging)"),
     ('[[pairs]]\neffects = ["jet_gain"]\n', "pairs[0].effects"),
 ])
 def test_spec_mistakes_name_file_and_key(tmp_path: Path, body: str, message: str):
@@ -77,3 +79,9 @@ def test_the_setup_study_has_every_setup_error_and_the_hypothesis_it_should_name
     assert ("jet_wiring=1,3,2", "jet_wiring_132") in expected and ("jet_wiring=2,3,1", "jet_wiring_231") in expected
     assert ("tracker_tilt_deg=6,-3", "tracker_tilt") in expected
     assert ("base_sensor_rotvec=0,0,0.1", "base_sensor_mounting") in expected
+    assert ("jet_force_sign=-1", "jet_force_sign") in expected
+    assert ("jet_force_scale=0.101972", "jet_force_unit_times_g") in expected
+    assert ("jet_force_scale=0.00980665", "jet_force_unit_gf") in expected
+    # A [[setup]] naming orientations runs on those only.
+    assert {cell.orientation for cell in cells if cell.setup[0] == "jet_force_scale"} == {"horizontal"}
+    assert {cell.orientation for cell in cells if cell.setup[0] != "jet_force_scale"} == {"hanging"}

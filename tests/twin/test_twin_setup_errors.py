@@ -11,6 +11,7 @@ import pytest
 
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.geometry import rotation_angle_deg
+from hydrojet_bench.plans import calibration_plan
 from hydrojet_bench.profile import load_profile
 from hydrojet_bench.twin import DigitalTwin, SensorNoise, SetupErrors, TwinConfig, parse_setup_error
 
@@ -31,6 +32,22 @@ def test_a_swapped_pair_fires_the_other_jet():
                                    correct.command_jet_forces(other, 1.0 + jet).tip_rotation_in_base, atol=1e-12)
 
 
+def test_reversed_jets_pull_and_mis_scaled_jets_push_a_multiple_of_the_command():
+    correct, reversed_, scaled = _twin(), _twin(jet_force_sign=-1), _twin(jet_force_scale=0.1)
+    forces = np.array([0.03, 0.01, 0.0])
+    pulled = reversed_.command_jet_forces(forces, 1.0)
+    pushed = correct.command_jet_forces(forces, 1.0)
+    lateral = pushed.tip_position_in_base_m[:2]
+    assert np.linalg.norm(lateral) > 5e-3
+    # Reversed: the tip swings to the other side by the same amount (hanging, gravity along the axis).
+    np.testing.assert_allclose(pulled.tip_position_in_base_m[:2], -lateral, atol=1e-9)
+    np.testing.assert_allclose(scaled.command_jet_forces(forces, 1.0).tip_position_in_base_m,
+                               correct.command_jet_forces(0.1 * forces, 2.0).tip_position_in_base_m, atol=1e-12)
+    # The recording keeps the commanded forces, as the rig's log would.
+    recording = scaled.run_plan(calibration_plan(2, seed=0), record_window_s=0.1, sensors="truth")
+    assert np.all(recording.jet_forces_n >= 0.0) and recording.jet_forces_n.max() > 0.01
+
+
 def test_a_tilted_tracker_turns_gravity_and_a_turned_base_sensor_turns_its_reading():
     tilted = _twin(tracker_tilt_deg=(3.0, 4.0))
     angle = np.degrees(np.arccos(-tilted.gravity_in_tracker_m_s2[2] / np.linalg.norm(tilted.gravity_in_tracker_m_s2)))
@@ -43,7 +60,17 @@ def test_a_tilted_tracker_turns_gravity_and_a_turned_base_sensor_turns_its_readi
 def test_setup_errors_parse_as_simulate_takes_them():
     errors = parse_setup_error("tracker_tilt_deg=2,-1", parse_setup_error("jet_wiring=2,3,1"))
     assert errors == SetupErrors(jet_wiring=(2, 3, 1), tracker_tilt_deg=(2.0, -1.0))
+    assert parse_setup_error("jet_force_sign=-1") == SetupErrors(jet_force_sign=-1)
+    assert parse_setup_error("jet_force_scale=0.00980665").jet_force_scale == 0.00980665
     for text, message in (("jet_wiring=1,1,2", "must be a permutation of 1, 2, 3"),
+                          ("jet_force_sign=0.5", "takes integers"),
+                          ("jet_force_sign=2", "must be 1 or -1"),
+                          ("jet_force_scale=-0.1", "must be a finite number > 0"),
+                          ("jet_force_scale=1,2", "takes one number, got 2"),
+                          # Each at its identity describes the rig as the profile does.
+                          ("jet_force_sign=1", "would hide nothing; give jet_force_sign another value"),
+                          ("jet_force_scale=1", "would hide nothing; give jet_force_scale another value"),
+                          ("jet_wiring=1,2,3", "would hide nothing; give jet_wiring another value"),
                           ("base_sensor_rotvec=0,0", "takes 3 comma-separated numbers, got 2"),
                           ("tracker_tilt_deg=a,b", "takes 2 comma-separated numbers")):
         with pytest.raises(UserError, match=message):

@@ -35,8 +35,10 @@
    found effect carries its share of the first baseline's excess squared error.
 
 7. Setup before physics (`setup`): in the first stage the setup hypotheses (a wrong
-   jet wiring, a tilted tracker, a turned base sensor) are fitted beside the physical
-   candidates, moved to their own ranking, and decided first (`setup.with_setup_stage`).
+   jet wiring, reversed or mis-scaled jet forces, a tilted tracker, a turned base sensor)
+   are fitted beside the physical candidates, moved to their own ranking, and decided
+   first (`setup.with_setup_stage`: setup wins unless a physical candidate is
+   significantly better by the held-out test of 5.).
    A setup winner joins the baseline like a physical one for the later stages.
 
 Score: BIC on the TRAINING residuals with the noise scale fixed at the measured floor,
@@ -76,7 +78,7 @@ from .evidence import (NOISE_GAP_PER_FLOOR, OnlineEvidence, cosine, hysteresis_g
 from .fitting import Fit, Problem, fit, fit_candidates, refit_candidates, session_gravity
 from .noise import NoiseFloor, estimate_noise_floor
 from .separate import SeparatingPose, separating_poses
-from .setup import SETUP_PREFERENCE_SCORE, SetupFix, fit_wirings, hypotheses, with_setup_stage
+from .setup import SetupFix, fit_discrete, hypotheses, with_setup_stage
 from .split import Split, split_session
 
 NONE, UNEXPLAINED = "none", "unexplained"
@@ -334,11 +336,11 @@ def diagnose(steps: Dataset, model_name: str = "cosserat", known_effects: Sequen
     baseline = fit(problem)
     say(f"baseline calibrated ({baseline.convergence})")
     # Setup hypotheses are fitted beside the physics in the first stage and decided first.
-    wirings, setups = hypotheses(problem, baseline)
+    discrete, setups = hypotheses(problem, baseline)
     first = with_setup_stage(_stage(problem, known, noise, baseline, setups + candidates, settings, started, say,
-                                    fitted_first=(wirings, fit_wirings(problem, wirings))),
-                             steps, SETUP_PREFERENCE_SCORE)
-    tried = wirings + setups + candidates
+                                    fitted_first=(discrete, fit_discrete(problem, discrete))),
+                             steps, lambda errors, best: _significantly_worse(errors, best, settings.significance))
+    tried = discrete + setups + candidates
     stages, current = [], first
     while (current.verdict not in (NONE, UNEXPLAINED) and current.remaining_excess
            and len(stages) + 1 < settings.depth):
@@ -368,7 +370,8 @@ def _stage(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baselin
            candidates: Sequence[Effect], settings: DiagnosisSettings, started: float,
            say: Callable[[str], None], fitted_first: tuple[Sequence[Effect], Sequence[Fit]] = ((), ())) -> Diagnosis:
     """One round: every candidate on top of ``baseline``, and the decision.
-    fitted_first: candidates already fitted another way (the wirings), with their fits."""
+    fitted_first: candidates already fitted another way (the discrete setup hypotheses), with
+    their fits."""
     fits = fit_candidates(problem, candidates, baseline, settings.workers,
                           progress=lambda done: say(f"fitted {done.effect} ({done.convergence})"))
     online = online_evidence(problem.model(), baseline.params, problem.steps, problem.split.held_out,

@@ -193,11 +193,11 @@ def predict_path(model: ShootingModel, params: ModelParameters, steps: Dataset,
                  gravity_in_base_m_s2: np.ndarray) -> tuple[Predictions, np.ndarray]:
     """Ref. at every step in recorded order, each solve carrying the previous one's path
     state (`PathPredictor` with the given gravity). Also returns the tip sensor's
-    position (N, 3), base frame, m."""
+    position (N, 3) as read in the measured base frame, m
+    (`Solution.tip_sensor_position_in_base_sensor_m`)."""
     offset = np.array(tip_sensor_offset_in_tip_m(steps))
     path = PathPredictor(model, params).predict(steps, gravity_in_base_m_s2)
-    sensor_positions = np.array([step.ref.solution.tip_position_in_base_m
-                                 + step.ref.solution.tip_rotation_in_base @ offset for step in path])
+    sensor_positions = np.array([step.ref.solution.tip_sensor_position_in_base_sensor_m(offset) for step in path])
     return Predictions.along(path, REF), sensor_positions
 
 

@@ -5,8 +5,8 @@ tip sensor's origin along the sensor's measured orientation. An unknown rotation
 sensor in its capsule (the library's sensor_mounting) turns that step and moves the
 reconstructed tip although nothing moved, so a model of the mounting could never fit
 those positions. The sensor's origin in the base frame is what the tracker measured,
-untouched by its orientation; a model predicts it as p_tip + R_tip offset, with the
-offset from the rig profile.
+untouched by its orientation; a model predicts it with
+`Solution.tip_sensor_position_in_base_sensor_m`, the offset from the rig profile.
 """
 
 from __future__ import annotations
