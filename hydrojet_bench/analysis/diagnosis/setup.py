@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ...data.dataset import Dataset
-from ...effects.setup import (BaseSensorMounting, JetForceSign, JetForceUnit, JetWiring, TrackerTilt, setup_effects,
+from ...effects.setup import (BaseSensorMounting, JetForceSign, JetForceUnit, TrackerTilt, setup_effects,
                               tilt_rotation)
 from ...errors import ConvergenceError
 from ...geometry import matrix_from_quat, quat_from_matrix, quat_multiply, rotation_angle_deg, so3_exp
