@@ -37,7 +37,11 @@ the wrong side of E's trade-off), so after fitting a candidate from the baseline
 coarse scan of its own parameters, the baseline's held fixed (a grid for one or two
 parameters, a step either way along each axis for more), looks for a better basin: a
 scan point whose chi^2 beats that fit's (with every parameter free) lies in another
-basin, and the candidate is fitted from there too, the better fit kept.
+basin, and the candidate is fitted from there too, the better fit kept. That scan
+cannot see a basin that needs the baseline's parameters elsewhere (a stiffening effect
+the baseline absorbed into E); before a stage calls the excess unexplained, a profile
+scan (`profile_starts`: the baseline's parameters re-fitted at each point) gives the
+one- and two-parameter candidates another start (`refit_candidates`).
 
 Bounds: a fit that ends on a search bound of its effect (one that is not the
 parameter's no-effect default) is refitted with the bounds widened to the physical
@@ -63,8 +67,6 @@ import numpy as np
 from dask.callbacks import Callback
 
 from ...data.dataset import Dataset
-from ..compare import compare
-from ..metrics import ErrorSummary
 from ...effects import Effect, qualified_parameter_names
 from ...effects.base import at_physical_limits
 from ...errors import ConvergenceError
@@ -74,6 +76,8 @@ from ...geometry import body_rotation_error, matrix_from_quat
 from ...models import make_model
 from ...models.shooting import ShootingModel
 from ...params import ModelParameters, with_parameters
+from ..compare import compare
+from ..metrics import ErrorSummary
 from .measurements import tip_sensor_offset_in_tip_m, tip_sensor_position_in_base_m
 from .split import Split
 
@@ -376,12 +380,11 @@ def profile_starts(problem: Problem, candidate: Effect, baseline: ModelParameter
     if len(grid) > PROFILE_MAX_POINTS:
         grid = [values for values in grid if sum(v != d for v, d in zip(values, defaults)) == 1]
     points = [dict(zip(names, values)) for values in grid]
-    model = problem.model(candidate)
-    rows = split_training_rows(problem)
+    model, poses, rows = problem.model(candidate), training_poses(problem), split_training_rows(problem)
     best, best_cost = None, fitted_chi2 - 1.0
     for point in points:
         try:
-            result = calibrate(model, training_poses(problem), with_parameters(baseline, point), problem.names(),
+            result = calibrate(model, poses, with_parameters(baseline, point), problem.names(),
                                position_weight_rad_per_m=problem.position_weight_rad_per_m,
                                max_evaluations=PROFILE_EVALUATIONS, follow_path=True, cost_tolerance=COST_TOLERANCE,
                                fitted=rows)
