@@ -25,7 +25,7 @@ import numpy as np
 
 from ..effects import Effect, effect_values, load_effect
 from ..errors import ConvergenceError
-from ..geometry import quat_from_matrix, se3, so3_exp
+from ..geometry import quat_from_matrix, se3
 from ..params import ModelParameters
 from . import kernels
 from ..effects.problem import RodProblem
@@ -118,11 +118,14 @@ class PreparedProblem:
     moment_scale_nm: float
     node_arc_length_m: np.ndarray
     wrench_scale: np.ndarray
+    # Whether the clamp turns under load (any base compliance): a `Solution` then reports
+    # the clamp's rotation, else a shared zero.
+    compliant_clamp: bool
 
     def _replace_tip(self, tip: np.ndarray) -> "PreparedProblem":
         return PreparedProblem(self.problem, self.profile, tip, self.base, self.beta, self.length_m,
                                self.force_scale_n, self.moment_scale_nm, self.node_arc_length_m,
-                               self.wrench_scale)
+                               self.wrench_scale, self.compliant_clamp)
 
     def with_jets(self, jet_forces_n: np.ndarray) -> "PreparedProblem":
         tip = self.tip.copy()
@@ -246,7 +249,8 @@ class ShootingModel:
             raise ValueError("effects produced a non-finite tip load or clamp parameter")
         return PreparedProblem(problem, profile, tip, base, problem.cubic_stiffening_m2 / length**2,
                                length, force_scale, moment_scale, self.node_arc_length_m(length),
-                               np.repeat([force_scale, moment_scale], 3))
+                               np.repeat([force_scale, moment_scale], 3),
+                               bool(base[kernels.BASE_COMPLIANCE:kernels.BASE_COMPLIANCE + 3].any()))
 
     # --- solving ------------------------------------------------------------------
 
@@ -319,30 +323,16 @@ class ShootingModel:
              have_jacobian: bool, load_scale: float, work: "_Workspace") -> bool:
         kernels.solve(self.kind, self.resolution, reference, jacobian, have_jacobian, prepared.profile,
                       prepared.tip, prepared.base, prepared.beta, load_scale, self.tolerance,
-                      self.max_iterations, work.nodes_p, work.nodes_r, work.clamp_state, work.info)
+                      self.max_iterations, prepared.length_m, prepared.wrench_scale, work.nodes_p, work.nodes_r,
+                      work.base_wrench, work.clamp_rotation, work.info)
         return work.info[0] == kernels.CONVERGED
 
     def _solution(self, prepared: PreparedProblem, jacobian: np.ndarray, work: "_Workspace") -> Solution:
         problem = prepared.problem
-        clamp = work.clamp_state
-        base_wrench = clamp[12:18] * prepared.wrench_scale
-        clamp_rotation = _NO_ROTATION
-        rotations = work.nodes_r
-        # Node 0 is the clamp frame by the boundary condition; report it exactly rather than
-        # the integrated frame, which matches it only to the solver tolerance plus RK4's
-        # drift off SO(3) (~1e-7 rad), so every user of the base frame agrees.
-        if prepared.base[kernels.BASE_COMPLIANCE:kernels.BASE_COMPLIANCE + 3].any():
-            clamp_rotation = np.array(kernels.clamp_rotation_vector(clamp[15:18], prepared.base))
-            rotations[0] = so3_exp(clamp_rotation)
-        else:
-            rotations[0] = np.eye(3)
-        # The shot starts with the tip at the origin; put the clamp there instead.
-        positions = work.nodes_p
-        positions -= clamp[:3]
-        positions *= prepared.length_m
         return Solution(
             self.name, prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].copy(), prepared.node_arc_length_m,
-            positions, rotations, base_wrench, clamp_rotation, problem.base_sensor_mounting,
+            work.nodes_p, work.nodes_r, work.base_wrench,
+            work.clamp_rotation if prepared.compliant_clamp else _NO_ROTATION, problem.base_sensor_mounting,
             problem.tip_sensor_mounting, int(work.info[1]), float(work.info[2]), jacobian,
         )
 
@@ -352,14 +342,16 @@ _NO_ROTATION.flags.writeable = False
 
 
 class _Workspace:
-    """Output buffers of one solve."""
+    """Output buffers of one solve (the kernel writes the shape and the clamp's wrench and
+    rotation; the `Solution` keeps them)."""
 
-    __slots__ = ("nodes_p", "nodes_r", "clamp_state", "info")
+    __slots__ = ("nodes_p", "nodes_r", "base_wrench", "clamp_rotation", "info")
 
     def __init__(self, nodes: int) -> None:
         self.nodes_p = np.empty((nodes, 3))
         self.nodes_r = np.empty((nodes, 3, 3))
-        self.clamp_state = np.empty(18)
+        self.base_wrench = np.empty(6)
+        self.clamp_rotation = np.empty(3)
         self.info = np.empty(4)
 
 
