@@ -95,7 +95,7 @@ def _so3_exp(wx, wy, wz, out):
     out[2, 2] = 1.0 - b * (wx * wx + wy * wy)
 
 
-@njit(cache=True, fastmath=_HOT)
+@njit(cache=True, fastmath=_HOT, inline="always")
 def _curvature(profile, row, load_scale, beta, mx, my, mz):
     """Invert the constitutive law at a sample point: body moment -> curvature u."""
     vx = mx * profile[row, COMPLIANCE]
@@ -130,7 +130,7 @@ def _curvature(profile, row, load_scale, beta, mx, my, mz):
             load_scale * profile[row, INTRINSIC_CURVATURE + 2] + mz * profile[row, COMPLIANCE + 2])
 
 
-@njit(cache=True, fastmath=_HOT)
+@njit(cache=True, fastmath=_HOT, inline="always")
 def _cosserat_derivative(y, profile, row, load_scale, beta):
     """Right-hand side of eqs. 21 in the base frame, on the state as an 18-tuple, and the
     curvature u it used. Tuples stay in registers; with arrays numba cannot prove the
@@ -164,7 +164,7 @@ def _cosserat_derivative(y, profile, row, load_scale, beta):
     ), (ux, uy, uz)
 
 
-@njit(cache=True, fastmath=_HOT)
+@njit(cache=True, fastmath=_HOT, inline="always")
 def _curvature_compliance(profile, row, load_scale, beta, u):
     """du/dm_b at a sample point where the curvature is ``u``: the inverse of the
     constitutive law's Jacobian, (a00, a01, a10, a11) for bending and the torsional
@@ -187,7 +187,7 @@ def _curvature_compliance(profile, row, load_scale, beta, u):
     return j11 / det, -j01 / det, -j10 / det, j00 / det, cz
 
 
-@njit(cache=True, fastmath=_HOT)
+@njit(cache=True, fastmath=_HOT, inline="always")
 def _tangent_rates(t, u, c, l, start, a, previous, dn, out):
     """The variational equation of eqs. 21 at an RK4 stage: ``out[:, d]`` = the derivative
     of the tangent start[:, d] + a * previous[:, d] (15 rows: dp, dR row-major, dm; one
@@ -268,6 +268,13 @@ def _clamp(m0x, m0y, m0z, base, rotation):
     return cx, cy, cz
 
 
+@njit(cache=True, inline="always")
+def _arm(rotation, tip, b, c):
+    """(R T)_bc for the 9 row-major entries of R and the tip's dead-force arm T."""
+    return (rotation[3 * b] * tip[TIP_DEAD_ARM + c] + rotation[3 * b + 1] * tip[TIP_DEAD_ARM + 3 + c]
+            + rotation[3 * b + 2] * tip[TIP_DEAD_ARM + 6 + c])
+
+
 @njit(cache=True)
 def _tip_wrench(rotation, tip, load_scale, dead, out):
     """Tip wrench (n, m in the base frame) into ``out`` (6) for a tip orientation given as
@@ -294,14 +301,9 @@ def _tip_wrench(rotation, tip, load_scale, dead, out):
         out[i] = load_scale * (r0 * ffx + r1 * ffy + r2 * ffz + constant * tip[TIP_DEAD_FORCE + i])
         out[3 + i] = load_scale * (r0 * fmx + r1 * fmy + r2 * fmz + constant * tip[TIP_DEAD_MOMENT + i])
     # Dead forces off the tip point: sum_i (R r_i) x F_i = eps_abc (R T)_bc, T = sum r_i F_i^T.
-    arm = np.empty((3, 3))
-    for b in range(3):
-        for c in range(3):
-            arm[b, c] = (rotation[3 * b] * tip[TIP_DEAD_ARM + c] + rotation[3 * b + 1] * tip[TIP_DEAD_ARM + 3 + c]
-                         + rotation[3 * b + 2] * tip[TIP_DEAD_ARM + 6 + c])
-    out[3] += load_scale * (arm[1, 2] - arm[2, 1])
-    out[4] += load_scale * (arm[2, 0] - arm[0, 2])
-    out[5] += load_scale * (arm[0, 1] - arm[1, 0])
+    out[3] += load_scale * (_arm(rotation, tip, 1, 2) - _arm(rotation, tip, 2, 1))
+    out[4] += load_scale * (_arm(rotation, tip, 2, 0) - _arm(rotation, tip, 0, 2))
+    out[5] += load_scale * (_arm(rotation, tip, 0, 1) - _arm(rotation, tip, 1, 0))
 
 
 @njit(cache=True)
@@ -318,7 +320,7 @@ def _tip_state(x, reference, tip, load_scale, y, work):
     _tip_wrench(y[3:12], tip, load_scale, True, y[12:18])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _store_node(y, index, nodes_p, nodes_r):
     """Store a node's position and frame as integrated (``y``: the state, an array or an
     18-tuple); `_finish_nodes` tidies the last shot's nodes once, after the solve."""
@@ -381,17 +383,17 @@ def _finish_nodes(clamp_state, base, length, wrench_scale, nodes_p, nodes_r, bas
         base_wrench[k] = clamp_state[12 + k] * wrench_scale[k]
 
 
-@njit(cache=True, fastmath=_HOT)
+@njit(cache=True, fastmath=_HOT, inline="always")
 def _axpy18(y, a, k):
     return (y[0] + a * k[0], y[1] + a * k[1], y[2] + a * k[2], y[3] + a * k[3], y[4] + a * k[4], y[5] + a * k[5], y[6] + a * k[6], y[7] + a * k[7], y[8] + a * k[8], y[9] + a * k[9], y[10] + a * k[10], y[11] + a * k[11], y[12] + a * k[12], y[13] + a * k[13], y[14] + a * k[14], y[15] + a * k[15], y[16] + a * k[16], y[17] + a * k[17])
 
 
-@njit(cache=True, fastmath=_HOT)
+@njit(cache=True, fastmath=_HOT, inline="always")
 def _rk4_sum18(y, sixth, k1, k2, k3, k4):
     return (y[0] + sixth * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]), y[1] + sixth * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]), y[2] + sixth * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]), y[3] + sixth * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]), y[4] + sixth * (k1[4] + 2.0 * (k2[4] + k3[4]) + k4[4]), y[5] + sixth * (k1[5] + 2.0 * (k2[5] + k3[5]) + k4[5]), y[6] + sixth * (k1[6] + 2.0 * (k2[6] + k3[6]) + k4[6]), y[7] + sixth * (k1[7] + 2.0 * (k2[7] + k3[7]) + k4[7]), y[8] + sixth * (k1[8] + 2.0 * (k2[8] + k3[8]) + k4[8]), y[9] + sixth * (k1[9] + 2.0 * (k2[9] + k3[9]) + k4[9]), y[10] + sixth * (k1[10] + 2.0 * (k2[10] + k3[10]) + k4[10]), y[11] + sixth * (k1[11] + 2.0 * (k2[11] + k3[11]) + k4[11]), y[12] + sixth * (k1[12] + 2.0 * (k2[12] + k3[12]) + k4[12]), y[13] + sixth * (k1[13] + 2.0 * (k2[13] + k3[13]) + k4[13]), y[14] + sixth * (k1[14] + 2.0 * (k2[14] + k3[14]) + k4[14]), y[15] + sixth * (k1[15] + 2.0 * (k2[15] + k3[15]) + k4[15]), y[16] + sixth * (k1[16] + 2.0 * (k2[16] + k3[16]) + k4[16]), y[17] + sixth * (k1[17] + 2.0 * (k2[17] + k3[17]) + k4[17]))
 
 
-@njit(cache=True, fastmath=_HOT)
+@njit(cache=True, fastmath=_HOT, inline="always")
 def _rk4_stages(y, h, profile, row, load_scale, beta):
     """One classic RK4 step of length h (negative: towards the clamp) from sample row
     ``row``; the midpoint and end use rows row -/+ 1 and 2 in the step's direction.
@@ -409,12 +411,12 @@ def _rk4_stages(y, h, profile, row, load_scale, beta):
     return _rk4_sum18(y, h / 6.0, k1, k2, k3, k4), t2, t3, t4, u1, u2, u3, u4
 
 
-@njit(cache=True, fastmath=_HOT)
+@njit(cache=True, fastmath=_HOT, inline="always")
 def _rk4_step(y, h, profile, row, load_scale, beta):
     return _rk4_stages(y, h, profile, row, load_scale, beta)[0]
 
 
-@njit(cache=True, fastmath=_HOT)
+@njit(cache=True, fastmath=_HOT, inline="always")
 def _moment_load(profile, row, load_scale):
     return (load_scale * profile[row, DISTRIBUTED_MOMENT], load_scale * profile[row, DISTRIBUTED_MOMENT + 1],
             load_scale * profile[row, DISTRIBUTED_MOMENT + 2])
@@ -804,23 +806,21 @@ def turned(rotation, rotation_vector):
 @njit(cache=True)
 def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, base, beta, load_scale,
           tolerance, max_iterations, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation, info):
-    """Damped Newton on the shooting residual; the unknown is a small rotation of the tip
-    about ``reference``, which is re-anchored after every accepted step (in place), and
-    ``jacobian`` is updated in place.
+    """Damped quasi-Newton on the shooting residual; the unknown is a small rotation of
+    the tip about ``reference``, which is re-anchored after every accepted step (in
+    place), and ``jacobian`` is updated in place.
 
     Starts from ``jacobian`` when ``have_jacobian`` (a warm start: the previous solve's
-    matrix is nearly right for a nearby load). Steps are Newton steps with backtracking.
-    The Cosserat rod gets exact Newton: a trial shot also propagates the tangents
-    (`shoot_with_jacobian`), so an accepted step brings the exact Jacobian at the new
-    point, except when the residual is already so small that the step is expected to
-    converge (the quadratic rate of the previous exact step says so), where a plain shot
-    and a Broyden update do. The PRB chain, which has no tangent kernel, gets Broyden
-    updates and forward differences. A Jacobian is rebuilt (tangents or differences)
-    whenever a step fails to reduce the residual. On return ``info`` holds [status,
+    matrix is nearly right for a nearby load), else builds it: exactly, from one shot
+    carrying the tangents, for the Cosserat rod (`shoot_with_jacobian`); by forward
+    differences for the PRB chain. Steps are Newton steps with backtracking; after an
+    accepted step the matrix gets a Broyden rank-one update, and it is rebuilt whenever
+    a step fails to reduce the residual. (Exact Newton, a tangent shot at every step,
+    takes 3 steps instead of 6 on a 4 % load change but is slower: a shot carrying three
+    tangents costs about four plain shots.) On return ``info`` holds [status,
     iterations, residual norm, jacobian evaluations]; if converged, the nodes hold the
     shape, ``base_wrench`` and ``clamp_rotation`` the clamp's (`_finish_nodes`).
     """
-    exact = kind == COSSERAT
     y = np.empty(18)
     work = np.empty((3, 3))
     scratch = np.empty((3, 3))
@@ -829,26 +829,16 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
     r_new = np.empty(3)
     step = np.empty(3)
     x_new = np.empty(3)
-    jacobian_new = np.empty((3, 3))
     clamp_state = np.empty(18)
-    jacobian_evaluations = 0
-    fresh = False
     # Every shot but the finite-difference ones stores its nodes, so the last accepted
     # shot's shape is already in place when the iteration stops.
-    if exact and not have_jacobian:
-        shoot_with_jacobian(resolution, x, reference, profile, tip, base, beta, load_scale, r, jacobian, y, work,
-                            nodes_p, nodes_r, True)
-        jacobian_evaluations += 1
-        have_jacobian = fresh = True
-    else:
-        shoot(kind, resolution, x, reference, profile, tip, base, beta, load_scale, r, y, work,
-              nodes_p, nodes_r, True)
+    shoot(kind, resolution, x, reference, profile, tip, base, beta, load_scale, r, y, work,
+          nodes_p, nodes_r, True)
     for k in range(18):
         clamp_state[k] = y[k]
     norm = _norm3(r)
-    # Quadratic rate |r_new| / |r|^2 of the last step taken with an exact Jacobian, which
-    # predicts the next residual; unknown (infinite) until such a step.
-    rate = np.inf
+    jacobian_evaluations = 0
+    fresh = False
     iterations = 0
     status = MAX_ITERATIONS
     while True:
@@ -862,9 +852,9 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
             status = MAX_ITERATIONS
             break
         if not have_jacobian:
-            if exact:
-                shoot_with_jacobian(resolution, x, reference, profile, tip, base, beta, load_scale, r, jacobian, y,
-                                    work, nodes_p, nodes_r, True)
+            if kind == COSSERAT:
+                shoot_with_jacobian(resolution, x, reference, profile, tip, base, beta, load_scale, r_new, jacobian,
+                                    y, work, nodes_p, nodes_r, False)
             else:
                 _finite_difference_jacobian(kind, resolution, x, reference, r, profile, tip, base, beta,
                                             load_scale, jacobian, y, work, nodes_p, nodes_r)
@@ -872,7 +862,6 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
             have_jacobian = True
             fresh = True
         iterations += 1
-        with_tangents = exact and rate * norm * norm >= tolerance
         accepted = False
         new_norm = norm
         if _solve3(jacobian, r, step):
@@ -880,12 +869,8 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
             for _ in range(10):
                 for k in range(3):
                     x_new[k] = -alpha * step[k]
-                if with_tangents:
-                    shoot_with_jacobian(resolution, x_new, reference, profile, tip, base, beta, load_scale, r_new,
-                                        jacobian_new, y, work, nodes_p, nodes_r, True)
-                else:
-                    shoot(kind, resolution, x_new, reference, profile, tip, base, beta, load_scale, r_new, y,
-                          work, nodes_p, nodes_r, True)
+                shoot(kind, resolution, x_new, reference, profile, tip, base, beta, load_scale, r_new, y,
+                      work, nodes_p, nodes_r, True)
                 new_norm = _norm3(r_new)
                 if np.isfinite(new_norm) and new_norm < (1.0 - 1e-4 * alpha) * norm:
                     accepted = True
@@ -897,24 +882,14 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
                 break
             have_jacobian = False
             continue
-        if fresh and alpha == 1.0:
-            rate = new_norm / (norm * norm)
-        if with_tangents:
-            # Exact at the new point, in the re-anchored unknown.
-            jacobian_evaluations += 1
-            for i in range(3):
-                for k in range(3):
-                    jacobian[i, k] = jacobian_new[i, k]
-            fresh = True
-        else:
-            # Broyden's "good" update: J += (dr - J dx) dx^T / (dx . dx).
-            dx_dot = x_new[0] * x_new[0] + x_new[1] * x_new[1] + x_new[2] * x_new[2]
-            for i in range(3):
-                predicted = jacobian[i, 0] * x_new[0] + jacobian[i, 1] * x_new[1] + jacobian[i, 2] * x_new[2]
-                correction = (r_new[i] - r[i] - predicted) / dx_dot
-                for k in range(3):
-                    jacobian[i, k] += correction * x_new[k]
-            fresh = False
+        # Broyden's "good" update: J += (dr - J dx) dx^T / (dx . dx).
+        dx_dot = x_new[0] * x_new[0] + x_new[1] * x_new[1] + x_new[2] * x_new[2]
+        for i in range(3):
+            predicted = jacobian[i, 0] * x_new[0] + jacobian[i, 1] * x_new[1] + jacobian[i, 2] * x_new[2]
+            correction = (r_new[i] - r[i] - predicted) / dx_dot
+            for k in range(3):
+                jacobian[i, k] += correction * x_new[k]
+        fresh = False
         _reanchor(reference, x_new, work, scratch)
         for k in range(3):
             r[k] = r_new[k]
@@ -996,61 +971,82 @@ def body_twist(rotation_a, position_a, rotation_b, position_b, out):
 def tip_wrench_sensitivity(kind, resolution, reference, profile, tip, base, beta, components, steps, length,
                            jacobian, columns):
     """Sensitivity of the tip pose to tip follower wrench components (w_d: 0-2 force, 3-5
-    moment, tip frame) at the converged tip orientation ``reference``, all columns from
-    3 + k + 1 shots and no solve.
+    moment, tip frame) at the converged tip orientation ``reference``, all columns in one
+    call and no solve.
 
     By the implicit function theorem the tip rotation moves by dx = -J^-1 dr/dw, where
     J = dr/dx is the shooting Jacobian and dr/dw the residual's change at a fixed tip
     orientation; the tip, relative to the clamp, moves by -(dP/dx dx + dP/dw), P the
-    clamp position of a shot started with the tip at the origin. Both partials are
-    forward differences of single shots, which are deterministic to rounding, not of
-    solves, which land anywhere within the solver tolerance. ``steps``: nondimensional
-    step per component. Writes ``jacobian`` (J at ``reference``: an accurate matrix for
-    solves near this one) and ``columns`` (6, k): body twists (v in units of ``length``,
-    omega) per unit of each component. Returns False when J is singular or a shot is not
-    finite."""
+    clamp position of a shot started with the tip at the origin. The Cosserat rod gets
+    every partial exactly from one shot carrying 3 + k tangents (`_shoot_tangents`);
+    the PRB chain from 3 + k + 1 single shots by forward differences (``steps``: the
+    nondimensional step per component), which are deterministic to rounding, unlike
+    differences of solves. Writes ``jacobian`` (J at ``reference``: the matrix for
+    solves near this one) and ``columns`` (6, k): body twists (v in units of
+    ``length``, omega) per unit of each component. Returns False when J is singular or
+    a shot is not finite."""
+    count = components.shape[0]
     y = np.empty(18)
     work = np.empty((3, 3))
     x = np.zeros(3)
-    r0 = np.empty(3)
-    r = np.empty(3)
-    rotation_rate = np.empty(3)
-    position_rate = np.empty(3)
-    moved = np.empty(3)
+    residual = np.empty(3)
     nodes_p = np.empty((1, 3))
     nodes_r = np.empty((1, 3, 3))
-    position_by_x = np.empty((3, 3))
-    shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, r0, y, work, nodes_p, nodes_r, False)
-    p0x, p0y, p0z = y[0], y[1], y[2]
-    for j in range(3):
-        # sqrt(machine epsilon): the residual is smooth and evaluated to rounding error.
-        h = 1.5e-8
-        x[j] = h
-        shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, r, y, work, nodes_p, nodes_r, False)
-        x[j] = 0.0
+    # Partials: residual (rows 0-2) and clamp position (rows 3-5) per unit of each
+    # tip-orientation direction (columns 0-2) and each component (columns 3 on).
+    partials = np.empty((6, 3 + count))
+    if kind == COSSERAT:
+        tangents = np.zeros((15, 3 + count))
+        dn = np.zeros((3, 3 + count))
+        _tip_state(x, reference, tip, 1.0, y, work)
+        for column in range(count):
+            component = components[column]
+            # A follower load turns with the tip: its base-frame direction is a column of R_L.
+            for i in range(3):
+                if component < 3:
+                    dn[i, 3 + column] = y[3 + 3 * i + component]
+                else:
+                    tangents[12 + i, 3 + column] = y[3 + 3 * i + component - 3]
+        _shoot_tangents(resolution, profile, tip, base, beta, 1.0, residual, partials[:3], y, tangents, dn, work,
+                        nodes_p, nodes_r, False)
+        partials[3:] = tangents[:3]
+    else:
+        r = np.empty(3)
+        shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, residual, y, work, nodes_p, nodes_r,
+              False)
+        p0x, p0y, p0z = y[0], y[1], y[2]
+        perturbed_tip = tip.copy()
+        for column in range(3 + count):
+            if column < 3:
+                # sqrt(machine epsilon): the residual is smooth and evaluated to rounding error.
+                step = 1.5e-8
+                x[column] = step
+                shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, r, y, work, nodes_p, nodes_r,
+                      False)
+                x[column] = 0.0
+            else:
+                index = TIP_FOLLOWER_FORCE + components[column - 3]
+                step = steps[column - 3]
+                perturbed_tip[index] = tip[index] + step
+                shoot(kind, resolution, x, reference, profile, perturbed_tip, base, beta, 1.0, r, y, work,
+                      nodes_p, nodes_r, False)
+                perturbed_tip[index] = tip[index]
+            for i in range(3):
+                partials[i, column] = (r[i] - residual[i]) / step
+            partials[3, column] = (y[0] - p0x) / step
+            partials[4, column] = (y[1] - p0y) / step
+            partials[5, column] = (y[2] - p0z) / step
+    jacobian[:, :] = partials[:3, :3]
+    rotation_rate = np.empty(3)
+    moved = np.empty(3)
+    for column in range(count):
         for i in range(3):
-            jacobian[i, j] = (r[i] - r0[i]) / h
-        position_by_x[0, j] = (y[0] - p0x) / h
-        position_by_x[1, j] = (y[1] - p0y) / h
-        position_by_x[2, j] = (y[2] - p0z) / h
-    perturbed_tip = tip.copy()
-    for column in range(components.shape[0]):
-        index = TIP_FOLLOWER_FORCE + components[column]
-        step = steps[column]
-        perturbed_tip[index] = tip[index] + step
-        shoot(kind, resolution, x, reference, profile, perturbed_tip, base, beta, 1.0, r, y, work,
-              nodes_p, nodes_r, False)
-        perturbed_tip[index] = tip[index]
-        for i in range(3):
-            r[i] = -(r[i] - r0[i]) / step
-        if not _solve3(jacobian, r, rotation_rate):
+            residual[i] = -partials[i, 3 + column]
+        if not _solve3(jacobian, residual, rotation_rate):
             return False
-        position_rate[0] = (y[0] - p0x) / step
-        position_rate[1] = (y[1] - p0y) / step
-        position_rate[2] = (y[2] - p0z) / step
         for i in range(3):
-            moved[i] = -(position_rate[i] + position_by_x[i, 0] * rotation_rate[0]
-                         + position_by_x[i, 1] * rotation_rate[1] + position_by_x[i, 2] * rotation_rate[2])
+            moved[i] = -(partials[3 + i, 3 + column] + partials[3 + i, 0] * rotation_rate[0]
+                         + partials[3 + i, 1] * rotation_rate[1] + partials[3 + i, 2] * rotation_rate[2])
         for k in range(3):
             columns[k, column] = length * (reference[0, k] * moved[0] + reference[1, k] * moved[1]
                                            + reference[2, k] * moved[2])
