@@ -912,6 +912,13 @@ def clamp_rotation_vector(moment, base):
 
 
 @njit(cache=True)
+def sensor_rotation(base_mounting, rotation, tip_mounting):
+    """base_mounting^T rotation tip_mounting, as a new matrix: what two orientation sensors
+    mounted so on the base and the tip read."""
+    return base_mounting.T @ (rotation @ tip_mounting)
+
+
+@njit(cache=True)
 def relative_rotation_vector(rotation_a, rotation_b, out):
     """Rotation vector (rad, in frame a) of R_a^T R_b, through its quaternion so it is
     accurate for small and large angles alike; returns the angle."""

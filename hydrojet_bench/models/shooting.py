@@ -17,8 +17,9 @@ shot may land on another equilibrium branch. When nothing converges it raises
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
@@ -93,7 +94,14 @@ class Solution:
         sensors measure (paper eq. 24's h), including any mounting rotations. The base
         sensor sits on the fixed holder (the base frame), not on the rod: a compliant
         clamp turns the rod relative to it, which is how such a clamp shows up."""
-        return self.base_sensor_mounting.T @ self.tip_rotation_in_base @ self.tip_sensor_mounting
+        return kernels.sensor_rotation(self.base_sensor_mounting, self.rotations_in_base[-1], self.tip_sensor_mounting)
+
+    def with_jacobian(self, jacobian: np.ndarray) -> "Solution":
+        """The same shape carrying another solver matrix (`dataclasses.replace` costs more
+        than a warm solve)."""
+        return Solution(self.model, self.jet_forces_n, self.arc_length_m, self.positions_in_base_m,
+                        self.rotations_in_base, self.base_wrench_in_base, self.base_rotation_vector_rad,
+                        self.base_sensor_mounting, self.tip_sensor_mounting, self.iterations, self.residual, jacobian)
 
     def tip_sensor_quaternion(self) -> np.ndarray:
         """`tip_sensor_in_base_sensor` as a quaternion (w, x, y, z)."""
@@ -204,7 +212,7 @@ class ShootingModel:
         forces changed, unless an effect reads them or the clamp depends on the path:
         rebuilding costs more than a warm solve."""
         jets = np.asarray(jet_forces_n, dtype=float)
-        if jets.shape != (3,) or not np.all(np.isfinite(jets)):
+        if jets.shape != (3,) or not all(map(math.isfinite, jets.tolist())):
             raise ValueError(f"jet_forces_n must be 3 finite numbers, got {jet_forces_n!r}")
         cached = self._cached
         if (cached is not None and cached.problem.params is params and not self._uses_actuation
@@ -305,7 +313,7 @@ class ShootingModel:
                                               components, steps, prepared.length_m, jacobian, columns):
             raise ConvergenceError(f"{self.name} model: the shooting Jacobian is singular or a shot diverged "
                                    "at this solution; no sensitivity")
-        return columns, replace(nominal, jacobian=jacobian)
+        return columns, nominal.with_jacobian(jacobian)
 
     def _ramp(self, prepared: PreparedProblem, stages: int, work: "_Workspace") -> Solution | None:
         """Continuation: scale every load from 1/stages up to 1, each stage seeded by the last."""
