@@ -18,9 +18,10 @@ starts at zero): every column then keeps four significant digits.
 below them. Central differences (two solves per column) are available for checks.
 
 The w_d columns are not differences of solves: w_d enters only the tip wrench, so
-`ShootingModel.tip_wrench_columns` gets them by the implicit function theorem from
-single shots at the nominal tip orientation (no solver noise; the step then only sets
-the truncation error).
+`ShootingModel.tip_wrench_columns` gets them by the implicit function theorem at the
+nominal tip orientation: for the Cosserat rod exactly, from one shot carrying the
+tangents (no step at all); for the PRB chain from single shots (no solver noise; the
+step then only sets the truncation error).
 """
 
 from __future__ import annotations

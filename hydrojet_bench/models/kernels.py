@@ -13,6 +13,13 @@ nonlinearity. The two models differ only in how they carry the state: the Cosser
 integrates eqs. 21 with classic RK4; the PRB chain steps across rigid links and
 spherical joints.
 
+The Cosserat shot can also carry tangents (forward mode): the derivatives of the RK4
+map itself, stage by stage, along any tip-orientation or tip-load direction, so one
+pass gives the residual and its exact Jacobian, or the exact w_d sensitivities. The
+small functions of the RK4 step are inlined into the loops (numba ``inline="always"``):
+left as calls, the 18-number state went through memory at every stage and a shot
+cost twice as much.
+
 Everything here is nondimensional: lengths by L, moments by EI_ref / L and forces by
 EI_ref / L^2 (EI_ref = E0 * I), so the unknowns and residuals are of order one and a
 single tolerance means the same for every rod. `hydrojet_bench.models.shooting` does the
@@ -902,13 +909,6 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
     info[1] = iterations
     info[2] = norm
     info[3] = jacobian_evaluations
-
-
-@njit(cache=True)
-def clamp_rotation_vector(moment, base):
-    """Rotation vector (rad) of the clamp under the (nondimensional) clamp moment."""
-    rotation = np.empty((3, 3))
-    return _clamp(moment[0], moment[1], moment[2], base, rotation)
 
 
 @njit(cache=True)
