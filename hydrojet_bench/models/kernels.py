@@ -837,7 +837,7 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
     step = np.empty(3)
     x_new = np.empty(3)
     clamp_state = np.empty(18)
-    # Every shot but the finite-difference ones stores its nodes, so the last accepted
+    # Every shot but those building the Jacobian stores its nodes, so the last accepted
     # shot's shape is already in place when the iteration stops.
     shoot(kind, resolution, x, reference, profile, tip, base, beta, load_scale, r, y, work,
           nodes_p, nodes_r, True)
