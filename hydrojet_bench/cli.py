@@ -27,14 +27,19 @@ COMMAND_MODULES = ("run", "replay", "sensors", "simulate", "calibrate", "compare
                    "perf", "emulate", "recover")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser of every command, or, given the arguments of one command (``argv``
+    starting with its name), of that command alone: importing every command loads
+    every command's dependencies (plotting, data frames, task scheduling, drivers),
+    which a `calibrate` of a large file then carries in memory for nothing."""
     parser = argparse.ArgumentParser(
         prog="hydrojet-bench",
         description="Hardware-in-the-loop bench for the HydroJet soft continuum robot.",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMAND_MODULES:
+    first = next((word for word in argv or () if not word.startswith("-")), None)
+    for name in (first,) if first in COMMAND_MODULES else COMMAND_MODULES:
         importlib.import_module(f"{__package__}.commands.{name}").register(subparsers)
     render.add_exit_codes(parser, {1: "a result that is no answer (replay: errors not finite; batch: a log failed)",
                                    143: "run stopped by SIGTERM (valves closed, log finished)"})
@@ -54,7 +59,7 @@ def _all_subparsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentPa
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    parser = build_parser(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()

@@ -19,9 +19,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import msgspec
+import numpy as np
 
 from .config.loading import convert, read_toml
 from .effects import Effect
@@ -29,6 +30,11 @@ from .effects.user import CheckedEffect
 from .config.schema import Finite
 from .errors import UserError
 from .params import PARAMETER_NAMES, PLAUSIBLE_RANGES, ModelParameters, check_plausible, with_parameters
+
+if TYPE_CHECKING:
+    from .data.dataset import Dataset
+    from .estimation.calibration import CalibrationResult
+    from .profile import RigProfile
 
 
 class ParameterFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
@@ -116,3 +122,19 @@ def read_parameter_file(path: Path) -> ParameterFile:
         raise UserError(f"{path}: parameters.{missing[0]} is missing{others}; a parameter file from calibrate "
                         f"lists {', '.join(PARAMETER_NAMES)}")
     return content
+
+
+def calibration_parameter_file(model: str, effects: Sequence[str], fit: CalibrationResult, data: Path,
+                               profile: RigProfile, fit_on: str, steps: Dataset, rows: np.ndarray) -> ParameterFile:
+    """The parameter file of a calibration on ``rows`` of ``steps`` (chosen by
+    ``fit_on``), with its provenance (data, profile, rows fitted, RMS orientation error
+    before and after, deg). ``effects``: specs as the file lists them (`effect_specs`)."""
+    return ParameterFile(
+        model=model, effects=tuple(effects),
+        parameters=dict(zip(fit.names, map(float, fit.values))),
+        standard_errors=dict(zip(fit.names, map(float, fit.standard_errors))),
+        calibration={"data": str(data), "profile": profile.source, "fit_on": fit_on,
+                     "poses": int(np.sum(rows & (steps.sweep == -1))),
+                     "sweep_steps": int(np.sum(rows & (steps.sweep >= 0))),
+                     "rms_orientation_deg_before": round(fit.rms_orientation_deg_before, 4),
+                     "rms_orientation_deg_after": round(fit.rms_orientation_deg_after, 4)})

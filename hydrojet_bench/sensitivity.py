@@ -18,9 +18,10 @@ starts at zero): every column then keeps four significant digits.
 below them. Central differences (two solves per column) are available for checks.
 
 The w_d columns are not differences of solves: w_d enters only the tip wrench, so
-`ShootingModel.tip_wrench_columns` gets them by the implicit function theorem from
-single shots at the nominal tip orientation (no solver noise; the step then only sets
-the truncation error).
+`ShootingModel.tip_wrench_columns` gets them by the implicit function theorem at the
+nominal tip orientation: for the Cosserat rod exactly, from one shot carrying the
+tangents (no step at all); for the PRB chain from single shots (no solver noise; the
+step then only sets the truncation error).
 """
 
 from __future__ import annotations
@@ -97,6 +98,19 @@ def disturbance_columns(model: ShootingModel, prepared: PreparedProblem, nominal
     return columns / unit, seed
 
 
+def parameter_steps(model: ShootingModel, params: ModelParameters, names: Sequence[str],
+                    relative_step: float = DEFAULT_RELATIVE_STEP) -> np.ndarray:
+    """The finite-difference step of each parameter: ``relative_step`` times its magnitude,
+    or its typical scale when smaller (see the module docstring)."""
+    steps = np.empty(len(names))
+    for column, name in enumerate(names):
+        scale = parameter_scale(model, name)  # raises for a name no enabled effect has
+        known = effect_parameter(model, name)
+        value = get_parameter(params, name, known.default if known else None)
+        steps[column] = relative_step * max(abs(value), scale)
+    return steps
+
+
 def sensitivity(model: ShootingModel, jet_forces_n: Sequence[float], params: ModelParameters,
                 names: Sequence[str], *, nominal: Solution | None = None, previous: Solution | None = None,
                 relative_step: float = DEFAULT_RELATIVE_STEP, central: bool = False) -> Sensitivity:
@@ -112,12 +126,7 @@ def sensitivity(model: ShootingModel, jet_forces_n: Sequence[float], params: Mod
     if nominal is None:
         nominal = model.solve_prepared(prepared, previous)
     columns = np.empty((6, len(names)))
-    steps = np.empty(len(names))
-    for column, name in enumerate(names):
-        scale = parameter_scale(model, name)
-        known = effect_parameter(model, name)
-        value = get_parameter(params, name, known.default if known else None)
-        steps[column] = relative_step * max(abs(value), scale)
+    steps = parameter_steps(model, params, names, relative_step)
     # w_d only enters the tip wrench: its columns come from one kernel call on the packed
     # problem, by the implicit function theorem (the online estimator's hot path). The
     # same call gives ``nominal`` an accurate Jacobian: the seed of every other solve.

@@ -25,8 +25,6 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import numpy as np
-
 from ..analysis.compare import compare_methods, compare_steps
 from ..analysis.diagnosis import DiagnosisSettings, diagnose as run_diagnosis
 from ..analysis.diagnosis.noise import repeatability_floor
@@ -34,13 +32,12 @@ from ..bench.replay import live_difference_deg, logged_steps, read_session, repl
 from ..effects import load_effect
 from ..errors import ConvergenceError, UserError
 from ..estimation import OnlineSettings
-from ..data.dataset import Dataset
-from ..estimation.calibration import (DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, CalibrationResult, calibrate_dataset,
+from ..estimation.calibration import (DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_dataset,
                                       fit_mask, rows_that_identify)
 from ..inputs import load_dataset
 from ..logs.condition import log_condition
 from ..model_choice import COSSERAT, ModelChoice, ModelDefaults, choose_model
-from ..params_io import ParameterFile, effect_specs
+from ..params_io import calibration_parameter_file, effect_specs
 from ..profile import RigProfile
 from .results import (CalibrateResult, CompareResult, DiagnoseResult, Measurements, ReplayResult, StudyResult)
 
@@ -93,22 +90,6 @@ def calibrate(data: Data, *, model: str | None = None, effects: Sequence[str] = 
     content = calibration_parameter_file(choice.model.name, effect_specs(choice.model.effects, Path.cwd()), fit,
                                          measurements.path, measurements.profile, fit_on, steps, rows)
     return CalibrateResult(choice.model, choice.effect_specs, steps.select(rows), fit, content)
-
-
-def calibration_parameter_file(model: str, effects: Sequence[str], fit: CalibrationResult, data: Path,
-                               profile: RigProfile, fit_on: str, steps: Dataset, rows: np.ndarray) -> ParameterFile:
-    """The parameter file of a calibration on ``rows`` of ``steps`` (chosen by
-    ``fit_on``), with its provenance (data, profile, rows fitted, RMS orientation error
-    before and after, deg). ``effects``: specs as the file lists them (`effect_specs`)."""
-    return ParameterFile(
-        model=model, effects=tuple(effects),
-        parameters=dict(zip(fit.names, map(float, fit.values))),
-        standard_errors=dict(zip(fit.names, map(float, fit.standard_errors))),
-        calibration={"data": str(data), "profile": profile.source, "fit_on": fit_on,
-                     "poses": int(np.sum(rows & (steps.sweep == -1))),
-                     "sweep_steps": int(np.sum(rows & (steps.sweep >= 0))),
-                     "rms_orientation_deg_before": round(fit.rms_orientation_deg_before, 4),
-                     "rms_orientation_deg_after": round(fit.rms_orientation_deg_after, 4)})
 
 
 def compare(data: Data, params: Params, *, baseline: Params = None, online: bool = False, model: str | None = None,

@@ -23,7 +23,7 @@ from ..estimation.calibration import (ALL_ROWS, DEFAULT_POSITION_WEIGHT_RAD_PER_
                                       fit_mask, rows_that_identify)
 from ..estimation.setup_warnings import calibration_warnings
 from ..model_choice import COSSERAT, ModelChoice, model_choice
-from ..params_io import effect_specs, write_parameter_file
+from ..params_io import calibration_parameter_file, effect_specs, write_parameter_file
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
 from .next_steps import command, input_words, print_next
@@ -47,8 +47,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..api import CalibrateResult, calibration_parameter_file
-
     if not args.position_weight >= 0:
         raise UserError(f"--position-weight must be >= 0, got {args.position_weight}")
     choice = model_choice(args)  # validates --effect before the data is read
@@ -87,6 +85,10 @@ def run(args: argparse.Namespace) -> int:
     write_parameter_file(args.output, content)
     console.print(f"wrote {render.plain(args.output)}")
     if args.json:
+        # The API (plots, data frames) only for its JSON: a large file's calibration
+        # should not carry it in memory.
+        from ..api import CalibrateResult
+
         render.write_json(args.json, CalibrateResult(model, choice.effect_specs, steps.select(rows), result,
                                                      content).as_dict())
     compare = command("compare", *input_words(args), "--params", args.output, "--online")

@@ -145,7 +145,7 @@ def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
 
     problem = _Problem()
     # Checks on whole rows, again reporting the earliest.
-    forces = np.column_stack([values["q1"], values["q2"], values["q3"]])
+    forces = _stacked(values, ("q1", "q2", "q3"))
     for j, column in enumerate(("q1", "q2", "q3")):
         negative = np.flatnonzero(forces[:, j] < 0.0)
         if len(negative):
@@ -154,7 +154,7 @@ def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
                                             f"pull), got {cell(i, column)}")
     orientations = {}
     for sensor, quaternion_columns in _QUATERNIONS.items():
-        q = np.column_stack([values[c] for c in quaternion_columns])
+        q = _stacked(values, quaternion_columns)
         with np.errstate(over="ignore"):  # a 1e308 component: its norm is inf, reported below
             norm = np.linalg.norm(q, axis=1)
         bad = np.flatnonzero(~(np.abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE))
@@ -182,7 +182,7 @@ def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
     rows = len(time)
     sweep = values.get("sweep", np.full(rows, -1, dtype=np.int64))
     step = values["step"] if "step" in values else steps_from_runs(sweep, forces)
-    positions = {sensor: (np.column_stack([values[c] for c in triplet]) if triplet[0] in values else None)
+    positions = {sensor: (_stacked(values, triplet) if triplet[0] in values else None)
                  for sensor, triplet in POSITION_COLUMNS.items()}
     try:
         return Dataset(
@@ -194,6 +194,11 @@ def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
         )
     except ValueError as error:  # the checks above should leave nothing for Dataset to find
         raise UserError(f"{name}: {error}") from None
+
+
+def _stacked(values: dict[str, np.ndarray], columns: tuple[str, ...]) -> np.ndarray:
+    """The columns side by side, taken out of ``values``: the copies alone stay in memory."""
+    return np.column_stack([values.pop(column) for column in columns])
 
 
 # Rows parsed per block: big enough that numpy's per-call cost vanishes, small enough
@@ -289,7 +294,12 @@ def _read_columns(handle: TextIO, name: str) -> tuple[dict[str, np.ndarray], lis
         raise UserError(f"{name}: the header (line {header_line}) is followed by no data rows")
     if problem.key is not None:
         raise UserError(problem.message)
-    values = {column: np.concatenate(parts) for column, parts in zip(columns, blocks)}
+    values = {}
+    for column, parts in zip(columns, blocks):
+        # Each column's blocks freed as soon as it is joined: joining every column before
+        # freeing any held the file's numbers twice.
+        values[column] = np.concatenate(parts)
+        parts.clear()
     return values, columns, np.frombuffer(line_numbers, dtype=np.int64)
 
 

@@ -47,7 +47,8 @@ from ..errors import ConvergenceError
 from ..geometry import body_rotation_error, matrix_from_quat
 from ..models.shooting import ShootingModel, Solution
 from ..params import DISTURBANCE_NAMES, PARAMETER_NAMES, ModelParameters, get_parameter, with_parameters
-from ..sensitivity import DEFAULT_RELATIVE_STEP, effect_parameter, parameter_scale, sensitivity
+from ..sensitivity import (DEFAULT_RELATIVE_STEP, disturbance_columns, effect_parameter, parameter_scale,
+                           parameter_steps)
 
 # Physical bounds of the core parameters; effect parameters carry their own.
 CORE_BOUNDS: dict[str, tuple[float, float]] = {
@@ -159,7 +160,7 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
     measured_positions = (np.array([poses[index].tip_position_in_base_sensor_m for index in fitted_indices])
                           if use_positions else None)
     offsets = np.array([poses[index].position_offset_in_tip_m or (0.0, 0.0, 0.0) for index in fitted_indices])
-    disturbance_columns = [column for column, name in enumerate(names) if name in DISTURBANCE_NAMES]
+    disturbance_indices = [column for column, name in enumerate(names) if name in DISTURBANCE_NAMES]
     cache: dict[bytes, tuple[np.ndarray, list[Solution], list[ModelParameters]]] = {}
     # Each pose's solution at the last evaluated parameters: the optimiser moves them a
     # little per evaluation, so they seed the next solves far better than the previous
@@ -209,19 +210,21 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         # On a path with state (a clamp with play) a parameter changes every later pose
         # through the state it leaves behind: differentiate along the whole perturbed path.
         along_path = follow_path and model.build_problem(poses[0].jet_forces_n, params[0]).depends_on_previous_state
-        batched = [] if along_path else disturbance_columns
+        batched = [] if along_path else disturbance_indices
         # Seeds for the perturbed solves below: the nominal solutions with the accurate
         # Jacobian the w_d columns leave behind converge in 2 iterations instead of 4-5.
         seeds = list(solutions)
         if batched:
             wanted = [names[column] for column in batched]
+            components = np.array([DISTURBANCE_NAMES.index(name) for name in wanted], dtype=np.int64)
+            # w_d is fitted, so every pose has the same value and the same steps.
+            steps = parameter_steps(model, params[0], wanted)
             for row, index in enumerate(fitted_indices):
                 pose, solution = poses[index], solutions[index]
                 # Each perturbed solve starts from the same history as the nominal one.
                 history = solutions[index - 1] if follow_path and index > 0 else None
-                columns_and_seed = sensitivity(model, pose.jet_forces_n, params[index], wanted, nominal=solution,
-                                               previous=history)
-                columns, seeds[index] = columns_and_seed.matrix, columns_and_seed.nominal
+                prepared = model.prepare(pose.jet_forces_n, params[index], history)
+                columns, seeds[index] = disturbance_columns(model, prepared, solution, components, steps)
                 rows = np.empty((rows_per_pose, len(batched)))
                 # d(log(R_pred^T R_meas))/dzeta = -(tip sensor mounting)^T S_rot, to first order.
                 rows[:3] = -solution.tip_sensor_mounting.T @ columns[3:]

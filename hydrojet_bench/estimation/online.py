@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
 
 from ..config.schema import OnlineSettings
 from ..geometry import matrix_from_quat
@@ -111,12 +112,10 @@ class OnlineDisturbanceEstimator:
         while done < budget and error > self.settings.tolerance_deg:
             steps = DEFAULT_RELATIVE_STEP * np.maximum(np.abs(self._moment), _MOMENT_SCALES)
             columns, seed = disturbance_columns(self.model, prepared, solution, _MOMENT_COMPONENTS, steps)
-            matrix = columns[3:]
-            gram = matrix @ matrix.T
-            mu = self.settings.damping * np.linalg.eigvalsh(gram)[-1]
+            matrix = np.ascontiguousarray(columns[3:])
             # omega_des is in the tip sensor's frame; the sensitivity in the rod tip's.
-            omega_tip = solution.tip_sensor_mounting @ omega
-            change = self.settings.gain * matrix.T @ np.linalg.solve(gram + mu * np.eye(3), omega_tip)
+            change = _damped_least_squares(matrix, solution.tip_sensor_mounting @ omega, self.settings.damping,
+                                           self.settings.gain)
             self._moment = self._moment + change
             prepared = packed.with_disturbance_moment(self._moment)
             # The same columns predict where the tip turns: the solve starts there.
@@ -131,6 +130,16 @@ class OnlineDisturbanceEstimator:
         """Angle (deg) from predicted to measured; writes the rotation vector (rad, tip
         sensor frame) into ``omega``."""
         return math.degrees(kernels.relative_rotation_vector(solution.tip_sensor_in_base_sensor(), measured, omega))
+
+
+@njit(cache=True)
+def _damped_least_squares(matrix, omega, damping, gain):
+    """gain S^T (S S^T + mu I)^-1 omega with mu = damping * the largest eigenvalue of S S^T
+    (eq. 4 with the damping's sign corrected, see the module docstring); one kernel
+    call, as numpy's small-matrix calls cost more than the solve."""
+    gram = matrix @ matrix.T
+    mu = damping * np.linalg.eigvalsh(gram)[-1]
+    return gain * (matrix.T @ np.linalg.solve(gram + mu * np.eye(gram.shape[0]), omega))
 
 
 _MOMENT_COMPONENTS = np.array([3, 4, 5], dtype=np.int64)

@@ -13,6 +13,13 @@ nonlinearity. The two models differ only in how they carry the state: the Cosser
 integrates eqs. 21 with classic RK4; the PRB chain steps across rigid links and
 spherical joints.
 
+The Cosserat shot can also carry tangents (forward mode): the derivatives of the RK4
+map itself, stage by stage, along any tip-orientation or tip-load direction, so one
+pass gives the residual and its exact Jacobian, or the exact w_d sensitivities. The
+small functions of the RK4 step are inlined into the loops (numba ``inline="always"``):
+left as calls, the 18-number state went through memory at every stage and a shot
+cost twice as much.
+
 Everything here is nondimensional: lengths by L, moments by EI_ref / L and forces by
 EI_ref / L^2 (EI_ref = E0 * I), so the unknowns and residuals are of order one and a
 single tolerance means the same for every rod. `hydrojet_bench.models.shooting` does the
@@ -95,7 +102,7 @@ def _so3_exp(wx, wy, wz, out):
     out[2, 2] = 1.0 - b * (wx * wx + wy * wy)
 
 
-@njit(cache=True, fastmath=_HOT)
+@njit(cache=True, fastmath=_HOT, inline="always")
 def _curvature(profile, row, load_scale, beta, mx, my, mz):
     """Invert the constitutive law at a sample point: body moment -> curvature u."""
     vx = mx * profile[row, COMPLIANCE]
@@ -130,11 +137,12 @@ def _curvature(profile, row, load_scale, beta, mx, my, mz):
             load_scale * profile[row, INTRINSIC_CURVATURE + 2] + mz * profile[row, COMPLIANCE + 2])
 
 
-@njit(cache=True, fastmath=_HOT)
+@njit(cache=True, fastmath=_HOT, inline="always")
 def _cosserat_derivative(y, profile, row, load_scale, beta):
-    """Right-hand side of eqs. 21 in the base frame, on the state as an 18-tuple. Tuples
-    stay in registers; with arrays numba cannot prove the state and its derivative
-    distinct and reloads after every store, which made the integrator 3-4x slower."""
+    """Right-hand side of eqs. 21 in the base frame, on the state as an 18-tuple, and the
+    curvature u it used. Tuples stay in registers; with arrays numba cannot prove the
+    state and its derivative distinct and reloads after every store, which made the
+    integrator 3-4x slower."""
     (px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, nx, ny, nz, gx, gy, gz) = y
     # Body-frame moment m_b = R^T m, then the curvature from the constitutive law.
     ux, uy, uz = _curvature(profile, row, load_scale, beta,
@@ -160,7 +168,85 @@ def _cosserat_derivative(y, profile, row, load_scale, beta):
         -(r12 * nz - r22 * ny) - (r00 * lx + r01 * ly + r02 * lz),
         -(r22 * nx - r02 * nz) - (r10 * lx + r11 * ly + r12 * lz),
         -(r02 * ny - r12 * nx) - (r20 * lx + r21 * ly + r22 * lz),
-    )
+    ), (ux, uy, uz)
+
+
+@njit(cache=True, fastmath=_HOT, inline="always")
+def _curvature_compliance(profile, row, load_scale, beta, u):
+    """du/dm_b at a sample point where the curvature is ``u``: the inverse of the
+    constitutive law's Jacobian, (a00, a01, a10, a11) for bending and the torsional
+    compliance; the linear law's compliances when beta = 0."""
+    cx = profile[row, COMPLIANCE]
+    cy = profile[row, COMPLIANCE + 1]
+    cz = profile[row, COMPLIANCE + 2]
+    if beta == 0.0:
+        return cx, 0.0, 0.0, cy, cz
+    vx = u[0] - load_scale * profile[row, INTRINSIC_CURVATURE]
+    vy = u[1] - load_scale * profile[row, INTRINSIC_CURVATURE + 1]
+    kx = profile[row, STIFFNESS]
+    ky = profile[row, STIFFNESS + 1]
+    s = vx * vx + vy * vy
+    j00 = kx * (1.0 + beta * (s + 2.0 * vx * vx))
+    j11 = ky * (1.0 + beta * (s + 2.0 * vy * vy))
+    j01 = kx * 2.0 * beta * vx * vy
+    j10 = ky * 2.0 * beta * vx * vy
+    det = j00 * j11 - j01 * j10
+    return j11 / det, -j01 / det, -j10 / det, j00 / det, cz
+
+
+@njit(cache=True, fastmath=_HOT, inline="always")
+def _tangent_rates(t, u, c, l, start, a, previous, dn, out):
+    """The variational equation of eqs. 21 at an RK4 stage: ``out[:, d]`` = the derivative
+    of the tangent start[:, d] + a * previous[:, d] (15 rows: dp, dR row-major, dm; one
+    column per direction) at the stage state ``t`` (18-tuple), whose curvature is ``u``
+    and local compliance ``c`` (`_curvature_compliance`); ``l`` the row's scaled
+    body-frame distributed moment. dn (3, D) is constant along the rod: the distributed
+    force does not depend on the state. Directions are columns so the loop runs over
+    contiguous memory."""
+    (px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, nx, ny, nz, gx, gy, gz) = t
+    ux, uy, uz = u
+    lx, ly, lz = l
+    for d in range(start.shape[1]):
+        d00 = start[3, d] + a * previous[3, d]
+        d01 = start[4, d] + a * previous[4, d]
+        d02 = start[5, d] + a * previous[5, d]
+        d10 = start[6, d] + a * previous[6, d]
+        d11 = start[7, d] + a * previous[7, d]
+        d12 = start[8, d] + a * previous[8, d]
+        d20 = start[9, d] + a * previous[9, d]
+        d21 = start[10, d] + a * previous[10, d]
+        d22 = start[11, d] + a * previous[11, d]
+        dgx = start[12, d] + a * previous[12, d]
+        dgy = start[13, d] + a * previous[13, d]
+        dgz = start[14, d] + a * previous[14, d]
+        dnx = dn[0, d]
+        dny = dn[1, d]
+        dnz = dn[2, d]
+        # d(m_b) = dR^T m + R^T dm, then du = (du/dm_b) d(m_b).
+        dbx = d00 * gx + d10 * gy + d20 * gz + r00 * dgx + r10 * dgy + r20 * dgz
+        dby = d01 * gx + d11 * gy + d21 * gz + r01 * dgx + r11 * dgy + r21 * dgz
+        dbz = d02 * gx + d12 * gy + d22 * gz + r02 * dgx + r12 * dgy + r22 * dgz
+        dux = c[0] * dbx + c[1] * dby
+        duy = c[2] * dbx + c[3] * dby
+        duz = c[4] * dbz
+        # dp' = dR e3.
+        out[0, d] = d02
+        out[1, d] = d12
+        out[2, d] = d22
+        # dR' = dR hat(u) + R hat(du).
+        out[3, d] = d01 * uz - d02 * uy + r01 * duz - r02 * duy
+        out[4, d] = d02 * ux - d00 * uz + r02 * dux - r00 * duz
+        out[5, d] = d00 * uy - d01 * ux + r00 * duy - r01 * dux
+        out[6, d] = d11 * uz - d12 * uy + r11 * duz - r12 * duy
+        out[7, d] = d12 * ux - d10 * uz + r12 * dux - r10 * duz
+        out[8, d] = d10 * uy - d11 * ux + r10 * duy - r11 * dux
+        out[9, d] = d21 * uz - d22 * uy + r21 * duz - r22 * duy
+        out[10, d] = d22 * ux - d20 * uz + r22 * dux - r20 * duz
+        out[11, d] = d20 * uy - d21 * ux + r20 * duy - r21 * dux
+        # dm' = -(dp' x n + p' x dn) - dR l.
+        out[12, d] = -(d12 * nz - d22 * ny + r12 * dnz - r22 * dny) - (d00 * lx + d01 * ly + d02 * lz)
+        out[13, d] = -(d22 * nx - d02 * nz + r22 * dnx - r02 * dnz) - (d10 * lx + d11 * ly + d12 * lz)
+        out[14, d] = -(d02 * ny - d12 * nx + r02 * dny - r12 * dnx) - (d20 * lx + d21 * ly + d22 * lz)
 
 
 @njit(cache=True)
@@ -189,17 +275,19 @@ def _clamp(m0x, m0y, m0z, base, rotation):
     return cx, cy, cz
 
 
+@njit(cache=True, inline="always")
+def _arm(rotation, tip, b, c):
+    """(R T)_bc for the 9 row-major entries of R and the tip's dead-force arm T."""
+    return (rotation[3 * b] * tip[TIP_DEAD_ARM + c] + rotation[3 * b + 1] * tip[TIP_DEAD_ARM + 3 + c]
+            + rotation[3 * b + 2] * tip[TIP_DEAD_ARM + 6 + c])
+
+
 @njit(cache=True)
-def _tip_state(x, reference, tip, load_scale, y, work):
-    """Tip state for the unknown x: p = 0, R_L = reference exp(x), n and m = tip wrench."""
-    _so3_exp(x[0], x[1], x[2], work)
-    for i in range(3):
-        for j in range(3):
-            y[3 + 3 * i + j] = (reference[i, 0] * work[0, j] + reference[i, 1] * work[1, j]
-                                + reference[i, 2] * work[2, j])
-    y[0] = 0.0
-    y[1] = 0.0
-    y[2] = 0.0
+def _tip_wrench(rotation, tip, load_scale, dead, out):
+    """Tip wrench (n, m in the base frame) into ``out`` (6) for a tip orientation given as
+    the 9 row-major entries ``rotation``; it is linear in them, which is also how the
+    tangent seeds use it (a rotation tangent, ``dead`` False: the dead loads are
+    constants)."""
     # Follower force in the tip frame: jets through the actuation matrix, plus the rest.
     ffx = tip[TIP_FOLLOWER_FORCE]
     ffy = tip[TIP_FOLLOWER_FORCE + 1]
@@ -212,58 +300,133 @@ def _tip_state(x, reference, tip, load_scale, y, work):
     fmx = tip[TIP_FOLLOWER_MOMENT]
     fmy = tip[TIP_FOLLOWER_MOMENT + 1]
     fmz = tip[TIP_FOLLOWER_MOMENT + 2]
+    constant = 1.0 if dead else 0.0
     for i in range(3):
-        r0 = y[3 + 3 * i]
-        r1 = y[4 + 3 * i]
-        r2 = y[5 + 3 * i]
-        y[12 + i] = load_scale * (r0 * ffx + r1 * ffy + r2 * ffz + tip[TIP_DEAD_FORCE + i])
-        y[15 + i] = load_scale * (r0 * fmx + r1 * fmy + r2 * fmz + tip[TIP_DEAD_MOMENT + i])
+        r0 = rotation[3 * i]
+        r1 = rotation[3 * i + 1]
+        r2 = rotation[3 * i + 2]
+        out[i] = load_scale * (r0 * ffx + r1 * ffy + r2 * ffz + constant * tip[TIP_DEAD_FORCE + i])
+        out[3 + i] = load_scale * (r0 * fmx + r1 * fmy + r2 * fmz + constant * tip[TIP_DEAD_MOMENT + i])
     # Dead forces off the tip point: sum_i (R r_i) x F_i = eps_abc (R T)_bc, T = sum r_i F_i^T.
-    for b in range(3):
-        for c in range(3):
-            work[b, c] = (y[3 + 3 * b] * tip[TIP_DEAD_ARM + c] + y[4 + 3 * b] * tip[TIP_DEAD_ARM + 3 + c]
-                          + y[5 + 3 * b] * tip[TIP_DEAD_ARM + 6 + c])
-    y[15] += load_scale * (work[1, 2] - work[2, 1])
-    y[16] += load_scale * (work[2, 0] - work[0, 2])
-    y[17] += load_scale * (work[0, 1] - work[1, 0])
+    out[3] += load_scale * (_arm(rotation, tip, 1, 2) - _arm(rotation, tip, 2, 1))
+    out[4] += load_scale * (_arm(rotation, tip, 2, 0) - _arm(rotation, tip, 0, 2))
+    out[5] += load_scale * (_arm(rotation, tip, 0, 1) - _arm(rotation, tip, 1, 0))
 
 
 @njit(cache=True)
-def _store_node(y, index, nodes_p, nodes_r):
-    """Store a node, its frame re-orthonormalised (Gram-Schmidt from the tangent): RK4
-    lets R drift off SO(3) by ~1e-6 over a large bend, which users should not see."""
+def _tip_state(x, reference, tip, load_scale, y, work):
+    """Tip state for the unknown x: p = 0, R_L = reference exp(x), n and m = tip wrench."""
+    _so3_exp(x[0], x[1], x[2], work)
     for i in range(3):
-        nodes_p[index, i] = y[i]
-    zx, zy, zz = y[5], y[8], y[11]
+        for j in range(3):
+            y[3 + 3 * i + j] = (reference[i, 0] * work[0, j] + reference[i, 1] * work[1, j]
+                                + reference[i, 2] * work[2, j])
+    y[0] = 0.0
+    y[1] = 0.0
+    y[2] = 0.0
+    _tip_wrench(y[3:12], tip, load_scale, True, y[12:18])
+
+
+@njit(cache=True, inline="always")
+def _store_node(y, index, nodes_p, nodes_r):
+    """Store a node's position and frame as integrated (``y``: the state, an array or an
+    18-tuple); `_finish_nodes` tidies the last shot's nodes once, after the solve."""
+    nodes_p[index, 0] = y[0]
+    nodes_p[index, 1] = y[1]
+    nodes_p[index, 2] = y[2]
+    nodes_r[index, 0, 0] = y[3]
+    nodes_r[index, 0, 1] = y[4]
+    nodes_r[index, 0, 2] = y[5]
+    nodes_r[index, 1, 0] = y[6]
+    nodes_r[index, 1, 1] = y[7]
+    nodes_r[index, 1, 2] = y[8]
+    nodes_r[index, 2, 0] = y[9]
+    nodes_r[index, 2, 1] = y[10]
+    nodes_r[index, 2, 2] = y[11]
+
+
+@njit(cache=True)
+def _orthonormalise(rotation):
+    """Re-orthonormalise a frame in place (Gram-Schmidt from the tangent): RK4 lets R drift
+    off SO(3) by ~1e-6 over a large bend, which users should not see."""
+    zx, zy, zz = rotation[0, 2], rotation[1, 2], rotation[2, 2]
     norm = np.sqrt(zx * zx + zy * zy + zz * zz)
     zx, zy, zz = zx / norm, zy / norm, zz / norm
-    xx, xy, xz = y[3], y[6], y[9]
+    xx, xy, xz = rotation[0, 0], rotation[1, 0], rotation[2, 0]
     dot = xx * zx + xy * zy + xz * zz
     xx, xy, xz = xx - dot * zx, xy - dot * zy, xz - dot * zz
     norm = np.sqrt(xx * xx + xy * xy + xz * xz)
     xx, xy, xz = xx / norm, xy / norm, xz / norm
-    nodes_r[index, 0, 0], nodes_r[index, 1, 0], nodes_r[index, 2, 0] = xx, xy, xz
-    nodes_r[index, 0, 1] = zy * xz - zz * xy
-    nodes_r[index, 1, 1] = zz * xx - zx * xz
-    nodes_r[index, 2, 1] = zx * xy - zy * xx
-    nodes_r[index, 0, 2], nodes_r[index, 1, 2], nodes_r[index, 2, 2] = zx, zy, zz
+    rotation[0, 0], rotation[1, 0], rotation[2, 0] = xx, xy, xz
+    rotation[0, 1] = zy * xz - zz * xy
+    rotation[1, 1] = zz * xx - zx * xz
+    rotation[2, 1] = zx * xy - zy * xx
+    rotation[0, 2], rotation[1, 2], rotation[2, 2] = zx, zy, zz
 
 
-@njit(cache=True, fastmath=_HOT)
-def _rk4_step(y, h, profile, row, load_scale, beta):
+@njit(cache=True)
+def _finish_nodes(clamp_state, base, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation):
+    """Turn the last shot's nodes into the shape users see: positions shifted so the clamp
+    is at the origin (the shot starts with the tip there) and scaled to metres, frames
+    re-orthonormalised, node 0 exactly the clamp frame (the integrated one matches it
+    only to the solver tolerance plus RK4's drift off SO(3), ~1e-7 rad, and every user
+    of the base frame should agree). Also writes the clamp wrench (N, N m) and the
+    clamp's rotation vector (rad)."""
+    for index in range(nodes_p.shape[0]):
+        for k in range(3):
+            nodes_p[index, k] = (nodes_p[index, k] - clamp_state[k]) * length
+        if index > 0:
+            _orthonormalise(nodes_r[index])
+    if base[BASE_COMPLIANCE] == 0.0 and base[BASE_COMPLIANCE + 1] == 0.0 and base[BASE_COMPLIANCE + 2] == 0.0:
+        # A rigid clamp does not turn, whatever play it is given.
+        cx = cy = cz = 0.0
+        _so3_exp(0.0, 0.0, 0.0, nodes_r[0])
+    else:
+        cx, cy, cz = _clamp(clamp_state[15], clamp_state[16], clamp_state[17], base, nodes_r[0])
+    clamp_rotation[0] = cx
+    clamp_rotation[1] = cy
+    clamp_rotation[2] = cz
+    for k in range(6):
+        base_wrench[k] = clamp_state[12 + k] * wrench_scale[k]
+
+
+@njit(cache=True, fastmath=_HOT, inline="always")
+def _axpy18(y, a, k):
+    return (y[0] + a * k[0], y[1] + a * k[1], y[2] + a * k[2], y[3] + a * k[3], y[4] + a * k[4], y[5] + a * k[5], y[6] + a * k[6], y[7] + a * k[7], y[8] + a * k[8], y[9] + a * k[9], y[10] + a * k[10], y[11] + a * k[11], y[12] + a * k[12], y[13] + a * k[13], y[14] + a * k[14], y[15] + a * k[15], y[16] + a * k[16], y[17] + a * k[17])
+
+
+@njit(cache=True, fastmath=_HOT, inline="always")
+def _rk4_sum18(y, sixth, k1, k2, k3, k4):
+    return (y[0] + sixth * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]), y[1] + sixth * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]), y[2] + sixth * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]), y[3] + sixth * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]), y[4] + sixth * (k1[4] + 2.0 * (k2[4] + k3[4]) + k4[4]), y[5] + sixth * (k1[5] + 2.0 * (k2[5] + k3[5]) + k4[5]), y[6] + sixth * (k1[6] + 2.0 * (k2[6] + k3[6]) + k4[6]), y[7] + sixth * (k1[7] + 2.0 * (k2[7] + k3[7]) + k4[7]), y[8] + sixth * (k1[8] + 2.0 * (k2[8] + k3[8]) + k4[8]), y[9] + sixth * (k1[9] + 2.0 * (k2[9] + k3[9]) + k4[9]), y[10] + sixth * (k1[10] + 2.0 * (k2[10] + k3[10]) + k4[10]), y[11] + sixth * (k1[11] + 2.0 * (k2[11] + k3[11]) + k4[11]), y[12] + sixth * (k1[12] + 2.0 * (k2[12] + k3[12]) + k4[12]), y[13] + sixth * (k1[13] + 2.0 * (k2[13] + k3[13]) + k4[13]), y[14] + sixth * (k1[14] + 2.0 * (k2[14] + k3[14]) + k4[14]), y[15] + sixth * (k1[15] + 2.0 * (k2[15] + k3[15]) + k4[15]), y[16] + sixth * (k1[16] + 2.0 * (k2[16] + k3[16]) + k4[16]), y[17] + sixth * (k1[17] + 2.0 * (k2[17] + k3[17]) + k4[17]))
+
+
+@njit(cache=True, fastmath=_HOT, inline="always")
+def _rk4_stages(y, h, profile, row, load_scale, beta):
     """One classic RK4 step of length h (negative: towards the clamp) from sample row
-    ``row``; the midpoint and end use rows row -/+ 1 and 2 in the step's direction."""
+    ``row``; the midpoint and end use rows row -/+ 1 and 2 in the step's direction.
+    Returns the new state, the stage states 2-4 and the curvature at each stage (what
+    the tangent step linearises about)."""
     direction = 1 if h > 0.0 else -1
     half = 0.5 * h
-    k1 = _cosserat_derivative(y, profile, row, load_scale, beta)
-    t = (y[0] + half * k1[0], y[1] + half * k1[1], y[2] + half * k1[2], y[3] + half * k1[3], y[4] + half * k1[4], y[5] + half * k1[5], y[6] + half * k1[6], y[7] + half * k1[7], y[8] + half * k1[8], y[9] + half * k1[9], y[10] + half * k1[10], y[11] + half * k1[11], y[12] + half * k1[12], y[13] + half * k1[13], y[14] + half * k1[14], y[15] + half * k1[15], y[16] + half * k1[16], y[17] + half * k1[17])
-    k2 = _cosserat_derivative(t, profile, row + direction, load_scale, beta)
-    t = (y[0] + half * k2[0], y[1] + half * k2[1], y[2] + half * k2[2], y[3] + half * k2[3], y[4] + half * k2[4], y[5] + half * k2[5], y[6] + half * k2[6], y[7] + half * k2[7], y[8] + half * k2[8], y[9] + half * k2[9], y[10] + half * k2[10], y[11] + half * k2[11], y[12] + half * k2[12], y[13] + half * k2[13], y[14] + half * k2[14], y[15] + half * k2[15], y[16] + half * k2[16], y[17] + half * k2[17])
-    k3 = _cosserat_derivative(t, profile, row + direction, load_scale, beta)
-    t = (y[0] + h * k3[0], y[1] + h * k3[1], y[2] + h * k3[2], y[3] + h * k3[3], y[4] + h * k3[4], y[5] + h * k3[5], y[6] + h * k3[6], y[7] + h * k3[7], y[8] + h * k3[8], y[9] + h * k3[9], y[10] + h * k3[10], y[11] + h * k3[11], y[12] + h * k3[12], y[13] + h * k3[13], y[14] + h * k3[14], y[15] + h * k3[15], y[16] + h * k3[16], y[17] + h * k3[17])
-    k4 = _cosserat_derivative(t, profile, row + 2 * direction, load_scale, beta)
-    sixth = h / 6.0
-    return (y[0] + sixth * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]), y[1] + sixth * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]), y[2] + sixth * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]), y[3] + sixth * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]), y[4] + sixth * (k1[4] + 2.0 * (k2[4] + k3[4]) + k4[4]), y[5] + sixth * (k1[5] + 2.0 * (k2[5] + k3[5]) + k4[5]), y[6] + sixth * (k1[6] + 2.0 * (k2[6] + k3[6]) + k4[6]), y[7] + sixth * (k1[7] + 2.0 * (k2[7] + k3[7]) + k4[7]), y[8] + sixth * (k1[8] + 2.0 * (k2[8] + k3[8]) + k4[8]), y[9] + sixth * (k1[9] + 2.0 * (k2[9] + k3[9]) + k4[9]), y[10] + sixth * (k1[10] + 2.0 * (k2[10] + k3[10]) + k4[10]), y[11] + sixth * (k1[11] + 2.0 * (k2[11] + k3[11]) + k4[11]), y[12] + sixth * (k1[12] + 2.0 * (k2[12] + k3[12]) + k4[12]), y[13] + sixth * (k1[13] + 2.0 * (k2[13] + k3[13]) + k4[13]), y[14] + sixth * (k1[14] + 2.0 * (k2[14] + k3[14]) + k4[14]), y[15] + sixth * (k1[15] + 2.0 * (k2[15] + k3[15]) + k4[15]), y[16] + sixth * (k1[16] + 2.0 * (k2[16] + k3[16]) + k4[16]), y[17] + sixth * (k1[17] + 2.0 * (k2[17] + k3[17]) + k4[17]))
+    k1, u1 = _cosserat_derivative(y, profile, row, load_scale, beta)
+    t2 = _axpy18(y, half, k1)
+    k2, u2 = _cosserat_derivative(t2, profile, row + direction, load_scale, beta)
+    t3 = _axpy18(y, half, k2)
+    k3, u3 = _cosserat_derivative(t3, profile, row + direction, load_scale, beta)
+    t4 = _axpy18(y, h, k3)
+    k4, u4 = _cosserat_derivative(t4, profile, row + 2 * direction, load_scale, beta)
+    return _rk4_sum18(y, h / 6.0, k1, k2, k3, k4), t2, t3, t4, u1, u2, u3, u4
+
+
+@njit(cache=True, fastmath=_HOT, inline="always")
+def _rk4_step(y, h, profile, row, load_scale, beta):
+    return _rk4_stages(y, h, profile, row, load_scale, beta)[0]
+
+
+@njit(cache=True, fastmath=_HOT, inline="always")
+def _moment_load(profile, row, load_scale):
+    return (load_scale * profile[row, DISTRIBUTED_MOMENT], load_scale * profile[row, DISTRIBUTED_MOMENT + 1],
+            load_scale * profile[row, DISTRIBUTED_MOMENT + 2])
 
 
 @njit(cache=True)
@@ -277,9 +440,46 @@ def _integrate_cosserat(steps, profile, load_scale, beta, y, nodes_p, nodes_r, s
     for step in range(steps - 1, -1, -1):
         state = _rk4_step(state, h, profile, 2 * step + 2, load_scale, beta)
         if store:
-            for k in range(18):
-                y[k] = state[k]
-            _store_node(y, step, nodes_p, nodes_r)
+            _store_node(state, step, nodes_p, nodes_r)
+    for k in range(18):
+        y[k] = state[k]
+
+
+@njit(cache=True, fastmath=_HOT)
+def _integrate_cosserat_tangent(steps, profile, load_scale, beta, y, tangents, dn, nodes_p, nodes_r, store):
+    """`_integrate_cosserat` carrying tangents along: ``tangents`` (15, D: dp, dR, dm per
+    direction) is read at the tip and overwritten at the clamp; ``dn`` (3, D) is constant
+    along the rod. The tangents go through the very stages of each RK4 step, so they are
+    the exact derivatives of the discrete shot (forward mode), to rounding."""
+    h = -1.0 / steps
+    half = 0.5 * h
+    sixth = h / 6.0
+    directions = tangents.shape[1]
+    k1 = np.empty((15, directions))
+    k2 = np.empty((15, directions))
+    k3 = np.empty((15, directions))
+    k4 = np.empty((15, directions))
+    state = (y[0], y[1], y[2], y[3], y[4], y[5], y[6], y[7], y[8], y[9], y[10], y[11], y[12], y[13], y[14], y[15], y[16], y[17])
+    if store:
+        _store_node(state, steps, nodes_p, nodes_r)
+    for step in range(steps - 1, -1, -1):
+        row = 2 * step + 2
+        new, t2, t3, t4, u1, u2, u3, u4 = _rk4_stages(state, h, profile, row, load_scale, beta)
+        middle = _moment_load(profile, row - 1, load_scale)
+        _tangent_rates(state, u1, _curvature_compliance(profile, row, load_scale, beta, u1),
+                       _moment_load(profile, row, load_scale), tangents, 0.0, tangents, dn, k1)
+        _tangent_rates(t2, u2, _curvature_compliance(profile, row - 1, load_scale, beta, u2), middle,
+                       tangents, half, k1, dn, k2)
+        _tangent_rates(t3, u3, _curvature_compliance(profile, row - 1, load_scale, beta, u3), middle,
+                       tangents, half, k2, dn, k3)
+        _tangent_rates(t4, u4, _curvature_compliance(profile, row - 2, load_scale, beta, u4),
+                       _moment_load(profile, row - 2, load_scale), tangents, h, k3, dn, k4)
+        for k in range(15):
+            for d in range(directions):
+                tangents[k, d] += sixth * (k1[k, d] + 2.0 * (k2[k, d] + k3[k, d]) + k4[k, d])
+        state = new
+        if store:
+            _store_node(state, step, nodes_p, nodes_r)
     for k in range(18):
         y[k] = state[k]
 
@@ -401,6 +601,147 @@ def shoot(kind, resolution, x, reference, profile, tip, base, beta, load_scale, 
 
 
 @njit(cache=True)
+def _orientation_seeds(y, tip, load_scale, tangents, dn, wrench):
+    """Tangents at the tip for the three right perturbations of the tip orientation,
+    R_L exp(e_d): dR = R_L hat(e_d), the follower wrench turning with it, p fixed."""
+    seed = np.empty(9)
+    for d in range(3):
+        # Column b of R hat(e_d) is e_d x e_b expressed by R: +/- one column of R, or zero.
+        a1 = (d + 1) % 3
+        a2 = (d + 2) % 3
+        for i in range(3):
+            seed[3 * i + d] = 0.0
+            seed[3 * i + a1] = y[3 + 3 * i + a2]
+            seed[3 * i + a2] = -y[3 + 3 * i + a1]
+        _tip_wrench(seed, tip, load_scale, False, wrench)
+        tangents[0, d] = tangents[1, d] = tangents[2, d] = 0.0
+        for k in range(9):
+            tangents[3 + k, d] = seed[k]
+        for k in range(3):
+            dn[k, d] = wrench[k]
+            tangents[12 + k, d] = wrench[3 + k]
+
+
+@njit(cache=True)
+def _clamp_tangent(m0x, m0y, m0z, dmx, dmy, dmz, base):
+    """Derivative of `_clamp`'s rotation vector along a change (dmx, dmy, dmz) of the base moment."""
+    dx = base[BASE_COMPLIANCE] * dmx
+    dy = base[BASE_COMPLIANCE + 1] * dmy
+    dz = base[BASE_COMPLIANCE + 2] * dmz
+    play = base[BASE_PLAY]
+    if play > 0.0:
+        ex = base[BASE_COMPLIANCE] * m0x - base[BASE_PREVIOUS_ROTATION]
+        ey = base[BASE_COMPLIANCE + 1] * m0y - base[BASE_PREVIOUS_ROTATION + 1]
+        ez = base[BASE_COMPLIANCE + 2] * m0z - base[BASE_PREVIOUS_ROTATION + 2]
+        distance = np.sqrt(ex * ex + ey * ey + ez * ez)
+        if distance == 0.0:
+            return 0.0, 0.0, 0.0
+        excess = distance - play
+        width = _PLAY_SMOOTHING * play
+        root = np.sqrt(excess * excess + width * width)
+        scale = 0.5 * (excess + root) / distance
+        scale_rate = (0.5 * (1.0 + excess / root) * distance - 0.5 * (excess + root)) / (distance * distance)
+        distance_rate = (ex * dx + ey * dy + ez * dz) / distance
+        return (scale * dx + scale_rate * distance_rate * ex, scale * dy + scale_rate * distance_rate * ey,
+                scale * dz + scale_rate * distance_rate * ez)
+    return dx, dy, dz
+
+
+@njit(cache=True)
+def _residual_tangents(y, base, tangents, work, out):
+    """Derivatives of `_clamp_residual` along each tangent (columns of ``tangents``) into the
+    columns of ``out`` (3, D): the chain rule through the clamp (compliance, play) and
+    the quaternion logarithm the residual uses."""
+    cx, cy, cz = _clamp(y[15], y[16], y[17], base, work)
+    m = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            m[i, j] = work[0, i] * y[3 + j] + work[1, i] * y[6 + j] + work[2, i] * y[9 + j]
+    one_plus_trace = 1.0 + m[0, 0] + m[1, 1] + m[2, 2]
+    if one_plus_trace <= 0.04:
+        # `_clamp_residual` is constant out there.
+        out[:, :] = 0.0
+        return
+    w = 0.5 * np.sqrt(one_plus_trace)
+    vx = (m[2, 1] - m[1, 2]) / (4.0 * w)
+    vy = (m[0, 2] - m[2, 0]) / (4.0 * w)
+    vz = (m[1, 0] - m[0, 1]) / (4.0 * w)
+    sine = np.sqrt(vx * vx + vy * vy + vz * vz)
+    small = sine < 1e-6
+    scale = 2.0 / w if small else 2.0 * np.arctan2(sine, w) / sine
+    # The clamp's right Jacobian J_r(c): dR_clamp = R_clamp hat(J_r(c) dc).
+    theta2 = cx * cx + cy * cy + cz * cz
+    if theta2 < 1e-12:
+        first, second = 0.5, 1.0 / 6.0
+    else:
+        theta = np.sqrt(theta2)
+        first = (1.0 - np.cos(theta)) / theta2
+        second = (theta - np.sin(theta)) / (theta2 * theta)
+    dm = np.empty((3, 3))
+    for d in range(tangents.shape[1]):
+        dcx, dcy, dcz = _clamp_tangent(y[15], y[16], y[17], tangents[12, d], tangents[13, d], tangents[14, d], base)
+        # phi = J_r(c) dc = dc - first c x dc + second c x (c x dc).
+        ax, ay, az = cy * dcz - cz * dcy, cz * dcx - cx * dcz, cx * dcy - cy * dcx
+        bx, by, bz = cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax
+        fx = dcx - first * ax + second * bx
+        fy = dcy - first * ay + second * by
+        fz = dcz - first * az + second * bz
+        # dM = -hat(phi) M + R_clamp^T dR(0).
+        for i in range(3):
+            for j in range(3):
+                dm[i, j] = (work[0, i] * tangents[3 + j, d] + work[1, i] * tangents[6 + j, d]
+                            + work[2, i] * tangents[9 + j, d])
+        for j in range(3):
+            hx = fy * m[2, j] - fz * m[1, j]
+            hy = fz * m[0, j] - fx * m[2, j]
+            hz = fx * m[1, j] - fy * m[0, j]
+            dm[0, j] -= hx
+            dm[1, j] -= hy
+            dm[2, j] -= hz
+        dw = (dm[0, 0] + dm[1, 1] + dm[2, 2]) / (8.0 * w)
+        dvx = (dm[2, 1] - dm[1, 2]) / (4.0 * w) - vx * dw / w
+        dvy = (dm[0, 2] - dm[2, 0]) / (4.0 * w) - vy * dw / w
+        dvz = (dm[1, 0] - dm[0, 1]) / (4.0 * w) - vz * dw / w
+        if small:
+            # scale = 2 atan2(s, w) / s = (2 / w) (1 + O(s^2)).
+            dscale = -2.0 * dw / (w * w)
+        else:
+            dsine = (vx * dvx + vy * dvy + vz * dvz) / sine
+            dangle = 2.0 * (w * dsine - sine * dw) / (sine * sine + w * w)
+            dscale = (dangle - scale * dsine) / sine
+        out[0, d] = dscale * vx + scale * dvx
+        out[1, d] = dscale * vy + scale * dvy
+        out[2, d] = dscale * vz + scale * dvz
+
+
+@njit(cache=True)
+def _shoot_tangents(resolution, profile, tip, base, beta, load_scale, residual, derivatives, y, tangents, dn, work,
+                    nodes_p, nodes_r, store):
+    """A Cosserat `shoot` from the tip state in ``y`` (`_tip_state`) that carries tangents
+    along: columns 0-2 of ``tangents``/``dn`` are seeded here with the tip orientation's
+    right perturbations, R_L exp(e_d); columns from 3 on are the caller's (other tip loads).
+    ``derivatives`` (3, D) gets dr along each tangent: its first three columns are the
+    Jacobian of the residual in the unknown re-anchored at this shot's tip,
+    d r / d x' for R_L exp(x'). ``tangents`` holds the clamp state's derivatives after."""
+    _orientation_seeds(y, tip, load_scale, tangents, dn, np.empty(6))
+    _integrate_cosserat_tangent(resolution, profile, load_scale, beta, y, tangents, dn, nodes_p, nodes_r, store)
+    _clamp_residual(y, base, residual, work)
+    _residual_tangents(y, base, tangents, work, derivatives)
+
+
+@njit(cache=True)
+def shoot_with_jacobian(resolution, x, reference, profile, tip, base, beta, load_scale, residual, jacobian, y,
+                        work, nodes_p, nodes_r, store):
+    """`shoot` for the Cosserat rod that also writes the exact Jacobian of the residual in
+    the right perturbation of this shot's tip orientation (see `_shoot_tangents`)."""
+    tangents = np.empty((15, 3))
+    dn = np.empty((3, 3))
+    _tip_state(x, reference, tip, load_scale, y, work)
+    _shoot_tangents(resolution, profile, tip, base, beta, load_scale, residual, jacobian, y, tangents, dn, work,
+                    nodes_p, nodes_r, store)
+
+
+@njit(cache=True)
 def _norm3(v):
     return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
@@ -471,18 +812,21 @@ def turned(rotation, rotation_vector):
 
 @njit(cache=True)
 def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, base, beta, load_scale,
-          tolerance, max_iterations, nodes_p, nodes_r, clamp_state, info):
+          tolerance, max_iterations, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation, info):
     """Damped quasi-Newton on the shooting residual; the unknown is a small rotation of
     the tip about ``reference``, which is re-anchored after every accepted step (in
     place), and ``jacobian`` is updated in place.
 
     Starts from ``jacobian`` when ``have_jacobian`` (a warm start: the previous solve's
-    matrix is nearly right for a nearby load), else builds it by forward differences.
-    Steps are Newton steps with backtracking; after an accepted step the matrix gets a
-    Broyden rank-one update, and it is rebuilt by finite differences whenever a step
-    fails to reduce the residual. On return ``info`` holds [status, iterations,
-    residual norm, jacobian evaluations]; if converged, the nodes hold the shape and
-    ``clamp_state`` the state (18) at the clamp.
+    matrix is nearly right for a nearby load), else builds it: exactly, from one shot
+    carrying the tangents, for the Cosserat rod (`shoot_with_jacobian`); by forward
+    differences for the PRB chain. Steps are Newton steps with backtracking; after an
+    accepted step the matrix gets a Broyden rank-one update, and it is rebuilt whenever
+    a step fails to reduce the residual. (Exact Newton, a tangent shot at every step,
+    takes 3 steps instead of 6 on a 4 % load change but is slower: a shot carrying three
+    tangents costs about four plain shots.) On return ``info`` holds [status,
+    iterations, residual norm, jacobian evaluations]; if converged, the nodes hold the
+    shape, ``base_wrench`` and ``clamp_rotation`` the clamp's (`_finish_nodes`).
     """
     y = np.empty(18)
     work = np.empty((3, 3))
@@ -492,7 +836,8 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
     r_new = np.empty(3)
     step = np.empty(3)
     x_new = np.empty(3)
-    # Every shot but the finite-difference ones stores its nodes, so the last accepted
+    clamp_state = np.empty(18)
+    # Every shot but those building the Jacobian stores its nodes, so the last accepted
     # shot's shape is already in place when the iteration stops.
     shoot(kind, resolution, x, reference, profile, tip, base, beta, load_scale, r, y, work,
           nodes_p, nodes_r, True)
@@ -514,8 +859,12 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
             status = MAX_ITERATIONS
             break
         if not have_jacobian:
-            _finite_difference_jacobian(kind, resolution, x, reference, r, profile, tip, base, beta,
-                                        load_scale, jacobian, y, work, nodes_p, nodes_r)
+            if kind == COSSERAT:
+                shoot_with_jacobian(resolution, x, reference, profile, tip, base, beta, load_scale, r_new, jacobian,
+                                    y, work, nodes_p, nodes_r, False)
+            else:
+                _finite_difference_jacobian(kind, resolution, x, reference, r, profile, tip, base, beta,
+                                            load_scale, jacobian, y, work, nodes_p, nodes_r)
             jacobian_evaluations += 1
             have_jacobian = True
             fresh = True
@@ -554,6 +903,8 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
         for k in range(18):
             clamp_state[k] = y[k]
         norm = new_norm
+    if status == CONVERGED:
+        _finish_nodes(clamp_state, base, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation)
     info[0] = status
     info[1] = iterations
     info[2] = norm
@@ -561,10 +912,10 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
 
 
 @njit(cache=True)
-def clamp_rotation_vector(moment, base):
-    """Rotation vector (rad) of the clamp under the (nondimensional) clamp moment."""
-    rotation = np.empty((3, 3))
-    return _clamp(moment[0], moment[1], moment[2], base, rotation)
+def sensor_rotation(base_mounting, rotation, tip_mounting):
+    """base_mounting^T rotation tip_mounting, as a new matrix: what two orientation sensors
+    mounted so on the base and the tip read."""
+    return base_mounting.T @ (rotation @ tip_mounting)
 
 
 @njit(cache=True)
@@ -627,61 +978,82 @@ def body_twist(rotation_a, position_a, rotation_b, position_b, out):
 def tip_wrench_sensitivity(kind, resolution, reference, profile, tip, base, beta, components, steps, length,
                            jacobian, columns):
     """Sensitivity of the tip pose to tip follower wrench components (w_d: 0-2 force, 3-5
-    moment, tip frame) at the converged tip orientation ``reference``, all columns from
-    3 + k + 1 shots and no solve.
+    moment, tip frame) at the converged tip orientation ``reference``, all columns in one
+    call and no solve.
 
     By the implicit function theorem the tip rotation moves by dx = -J^-1 dr/dw, where
     J = dr/dx is the shooting Jacobian and dr/dw the residual's change at a fixed tip
     orientation; the tip, relative to the clamp, moves by -(dP/dx dx + dP/dw), P the
-    clamp position of a shot started with the tip at the origin. Both partials are
-    forward differences of single shots, which are deterministic to rounding, not of
-    solves, which land anywhere within the solver tolerance. ``steps``: nondimensional
-    step per component. Writes ``jacobian`` (J at ``reference``: an accurate matrix for
-    solves near this one) and ``columns`` (6, k): body twists (v in units of ``length``,
-    omega) per unit of each component. Returns False when J is singular or a shot is not
-    finite."""
+    clamp position of a shot started with the tip at the origin. The Cosserat rod gets
+    every partial exactly from one shot carrying 3 + k tangents (`_shoot_tangents`);
+    the PRB chain from 3 + k + 1 single shots by forward differences (``steps``: the
+    nondimensional step per component), which are deterministic to rounding, unlike
+    differences of solves. Writes ``jacobian`` (J at ``reference``: the matrix for
+    solves near this one) and ``columns`` (6, k): body twists (v in units of
+    ``length``, omega) per unit of each component. Returns False when J is singular or
+    a shot is not finite."""
+    count = components.shape[0]
     y = np.empty(18)
     work = np.empty((3, 3))
     x = np.zeros(3)
-    r0 = np.empty(3)
-    r = np.empty(3)
-    rotation_rate = np.empty(3)
-    position_rate = np.empty(3)
-    moved = np.empty(3)
+    residual = np.empty(3)
     nodes_p = np.empty((1, 3))
     nodes_r = np.empty((1, 3, 3))
-    position_by_x = np.empty((3, 3))
-    shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, r0, y, work, nodes_p, nodes_r, False)
-    p0x, p0y, p0z = y[0], y[1], y[2]
-    for j in range(3):
-        # sqrt(machine epsilon): the residual is smooth and evaluated to rounding error.
-        h = 1.5e-8
-        x[j] = h
-        shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, r, y, work, nodes_p, nodes_r, False)
-        x[j] = 0.0
+    # Partials: residual (rows 0-2) and clamp position (rows 3-5) per unit of each
+    # tip-orientation direction (columns 0-2) and each component (columns 3 on).
+    partials = np.empty((6, 3 + count))
+    if kind == COSSERAT:
+        tangents = np.zeros((15, 3 + count))
+        dn = np.zeros((3, 3 + count))
+        _tip_state(x, reference, tip, 1.0, y, work)
+        for column in range(count):
+            component = components[column]
+            # A follower load turns with the tip: its base-frame direction is a column of R_L.
+            for i in range(3):
+                if component < 3:
+                    dn[i, 3 + column] = y[3 + 3 * i + component]
+                else:
+                    tangents[12 + i, 3 + column] = y[3 + 3 * i + component - 3]
+        _shoot_tangents(resolution, profile, tip, base, beta, 1.0, residual, partials[:3], y, tangents, dn, work,
+                        nodes_p, nodes_r, False)
+        partials[3:] = tangents[:3]
+    else:
+        r = np.empty(3)
+        shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, residual, y, work, nodes_p, nodes_r,
+              False)
+        p0x, p0y, p0z = y[0], y[1], y[2]
+        perturbed_tip = tip.copy()
+        for column in range(3 + count):
+            if column < 3:
+                # sqrt(machine epsilon): the residual is smooth and evaluated to rounding error.
+                step = 1.5e-8
+                x[column] = step
+                shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, r, y, work, nodes_p, nodes_r,
+                      False)
+                x[column] = 0.0
+            else:
+                index = TIP_FOLLOWER_FORCE + components[column - 3]
+                step = steps[column - 3]
+                perturbed_tip[index] = tip[index] + step
+                shoot(kind, resolution, x, reference, profile, perturbed_tip, base, beta, 1.0, r, y, work,
+                      nodes_p, nodes_r, False)
+                perturbed_tip[index] = tip[index]
+            for i in range(3):
+                partials[i, column] = (r[i] - residual[i]) / step
+            partials[3, column] = (y[0] - p0x) / step
+            partials[4, column] = (y[1] - p0y) / step
+            partials[5, column] = (y[2] - p0z) / step
+    jacobian[:, :] = partials[:3, :3]
+    rotation_rate = np.empty(3)
+    moved = np.empty(3)
+    for column in range(count):
         for i in range(3):
-            jacobian[i, j] = (r[i] - r0[i]) / h
-        position_by_x[0, j] = (y[0] - p0x) / h
-        position_by_x[1, j] = (y[1] - p0y) / h
-        position_by_x[2, j] = (y[2] - p0z) / h
-    perturbed_tip = tip.copy()
-    for column in range(components.shape[0]):
-        index = TIP_FOLLOWER_FORCE + components[column]
-        step = steps[column]
-        perturbed_tip[index] = tip[index] + step
-        shoot(kind, resolution, x, reference, profile, perturbed_tip, base, beta, 1.0, r, y, work,
-              nodes_p, nodes_r, False)
-        perturbed_tip[index] = tip[index]
-        for i in range(3):
-            r[i] = -(r[i] - r0[i]) / step
-        if not _solve3(jacobian, r, rotation_rate):
+            residual[i] = -partials[i, 3 + column]
+        if not _solve3(jacobian, residual, rotation_rate):
             return False
-        position_rate[0] = (y[0] - p0x) / step
-        position_rate[1] = (y[1] - p0y) / step
-        position_rate[2] = (y[2] - p0z) / step
         for i in range(3):
-            moved[i] = -(position_rate[i] + position_by_x[i, 0] * rotation_rate[0]
-                         + position_by_x[i, 1] * rotation_rate[1] + position_by_x[i, 2] * rotation_rate[2])
+            moved[i] = -(partials[3 + i, 3 + column] + partials[3 + i, 0] * rotation_rate[0]
+                         + partials[3 + i, 1] * rotation_rate[1] + partials[3 + i, 2] * rotation_rate[2])
         for k in range(3):
             columns[k, column] = length * (reference[0, k] * moved[0] + reference[1, k] * moved[1]
                                            + reference[2, k] * moved[2])

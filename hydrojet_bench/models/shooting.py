@@ -17,15 +17,16 @@ shot may land on another equilibrium branch. When nothing converges it raises
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
 
 from ..effects import Effect, effect_values, load_effect
 from ..errors import ConvergenceError
-from ..geometry import quat_from_matrix, se3, so3_exp
+from ..geometry import quat_from_matrix, se3
 from ..params import ModelParameters
 from . import kernels
 from ..effects.problem import RodProblem
@@ -97,7 +98,14 @@ class Solution:
         sensors measure (paper eq. 24's h), including any mounting rotations. The base
         sensor sits on the fixed holder (the base frame), not on the rod: a compliant
         clamp turns the rod relative to it, which is how such a clamp shows up."""
-        return self.base_sensor_mounting.T @ self.tip_rotation_in_base @ self.tip_sensor_mounting
+        return kernels.sensor_rotation(self.base_sensor_mounting, self.rotations_in_base[-1], self.tip_sensor_mounting)
+
+    def with_jacobian(self, jacobian: np.ndarray) -> "Solution":
+        """The same shape carrying another solver matrix (`dataclasses.replace` costs more
+        than a warm solve)."""
+        return Solution(self.model, self.jet_forces_n, self.arc_length_m, self.positions_in_base_m,
+                        self.rotations_in_base, self.base_wrench_in_base, self.base_rotation_vector_rad,
+                        self.base_sensor_mounting, self.tip_sensor_mounting, self.iterations, self.residual, jacobian)
 
     def tip_sensor_position_in_base_sensor_m(self, offset_in_tip_m: np.ndarray) -> np.ndarray:
         """Where a tip sensor at ``offset_in_tip_m`` (tip frame, m) is read in the base
@@ -132,11 +140,14 @@ class PreparedProblem:
     moment_scale_nm: float
     node_arc_length_m: np.ndarray
     wrench_scale: np.ndarray
+    # Whether the clamp turns under load (any base compliance): a `Solution` then reports
+    # the clamp's rotation, else a shared zero.
+    compliant_clamp: bool
 
     def _replace_tip(self, tip: np.ndarray) -> "PreparedProblem":
         return PreparedProblem(self.problem, self.profile, tip, self.base, self.beta, self.length_m,
                                self.force_scale_n, self.moment_scale_nm, self.node_arc_length_m,
-                               self.wrench_scale)
+                               self.wrench_scale, self.compliant_clamp)
 
     def with_jets(self, jet_forces_n: np.ndarray) -> "PreparedProblem":
         tip = self.tip.copy()
@@ -215,7 +226,7 @@ class ShootingModel:
         forces changed, unless an effect reads them or the clamp depends on the path:
         rebuilding costs more than a warm solve."""
         jets = np.asarray(jet_forces_n, dtype=float)
-        if jets.shape != (3,) or not np.all(np.isfinite(jets)):
+        if jets.shape != (3,) or not all(map(math.isfinite, jets.tolist())):
             raise ValueError(f"jet_forces_n must be 3 finite numbers, got {jet_forces_n!r}")
         cached = self._cached
         if (cached is not None and cached.problem.params is params and not self._uses_actuation
@@ -260,7 +271,8 @@ class ShootingModel:
             raise ValueError("effects produced a non-finite tip load or clamp parameter")
         return PreparedProblem(problem, profile, tip, base, problem.cubic_stiffening_m2 / length**2,
                                length, force_scale, moment_scale, self.node_arc_length_m(length),
-                               np.repeat([force_scale, moment_scale], 3))
+                               np.repeat([force_scale, moment_scale], 3),
+                               bool(base[kernels.BASE_COMPLIANCE:kernels.BASE_COMPLIANCE + 3].any()))
 
     # --- solving ------------------------------------------------------------------
 
@@ -315,7 +327,7 @@ class ShootingModel:
                                               components, steps, prepared.length_m, jacobian, columns):
             raise ConvergenceError(f"{self.name} model: the shooting Jacobian is singular or a shot diverged "
                                    "at this solution; no sensitivity")
-        return columns, replace(nominal, jacobian=jacobian)
+        return columns, nominal.with_jacobian(jacobian)
 
     def _ramp(self, prepared: PreparedProblem, stages: int, work: "_Workspace") -> Solution | None:
         """Continuation: scale every load from 1/stages up to 1, each stage seeded by the last."""
@@ -333,30 +345,16 @@ class ShootingModel:
              have_jacobian: bool, load_scale: float, work: "_Workspace") -> bool:
         kernels.solve(self.kind, self.resolution, reference, jacobian, have_jacobian, prepared.profile,
                       prepared.tip, prepared.base, prepared.beta, load_scale, self.tolerance,
-                      self.max_iterations, work.nodes_p, work.nodes_r, work.clamp_state, work.info)
+                      self.max_iterations, prepared.length_m, prepared.wrench_scale, work.nodes_p, work.nodes_r,
+                      work.base_wrench, work.clamp_rotation, work.info)
         return work.info[0] == kernels.CONVERGED
 
     def _solution(self, prepared: PreparedProblem, jacobian: np.ndarray, work: "_Workspace") -> Solution:
         problem = prepared.problem
-        clamp = work.clamp_state
-        base_wrench = clamp[12:18] * prepared.wrench_scale
-        clamp_rotation = _NO_ROTATION
-        rotations = work.nodes_r
-        # Node 0 is the clamp frame by the boundary condition; report it exactly rather than
-        # the integrated frame, which matches it only to the solver tolerance plus RK4's
-        # drift off SO(3) (~1e-7 rad), so every user of the base frame agrees.
-        if prepared.base[kernels.BASE_COMPLIANCE:kernels.BASE_COMPLIANCE + 3].any():
-            clamp_rotation = np.array(kernels.clamp_rotation_vector(clamp[15:18], prepared.base))
-            rotations[0] = so3_exp(clamp_rotation)
-        else:
-            rotations[0] = np.eye(3)
-        # The shot starts with the tip at the origin; put the clamp there instead.
-        positions = work.nodes_p
-        positions -= clamp[:3]
-        positions *= prepared.length_m
         return Solution(
             self.name, prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].copy(), prepared.node_arc_length_m,
-            positions, rotations, base_wrench, clamp_rotation, problem.base_sensor_mounting,
+            work.nodes_p, work.nodes_r, work.base_wrench,
+            work.clamp_rotation if prepared.compliant_clamp else _NO_ROTATION, problem.base_sensor_mounting,
             problem.tip_sensor_mounting, int(work.info[1]), float(work.info[2]), jacobian,
             problem.base_sensor_offset_m,
         )
@@ -367,14 +365,16 @@ _NO_ROTATION.flags.writeable = False
 
 
 class _Workspace:
-    """Output buffers of one solve."""
+    """Output buffers of one solve (the kernel writes the shape and the clamp's wrench and
+    rotation; the `Solution` keeps them)."""
 
-    __slots__ = ("nodes_p", "nodes_r", "clamp_state", "info")
+    __slots__ = ("nodes_p", "nodes_r", "base_wrench", "clamp_rotation", "info")
 
     def __init__(self, nodes: int) -> None:
         self.nodes_p = np.empty((nodes, 3))
         self.nodes_r = np.empty((nodes, 3, 3))
-        self.clamp_state = np.empty(18)
+        self.base_wrench = np.empty(6)
+        self.clamp_rotation = np.empty(3)
         self.info = np.empty(4)
 
 
