@@ -41,13 +41,14 @@ from ..data.dataset import Dataset
 from ..errors import ConvergenceError, UserError
 from ..estimation.calibration import CalibrationResult, calibrate_dataset
 from ..estimation.setup_warnings import calibration_warnings
+from ..estimation.online import OnlineSettings
 from ..estimation.path import PathPredictor, StepPrediction
 from ..logs import LogWriter, floats
 from ..logs.topics import (Disturbance, EmFrame, EmTool, Event, ImuOrientation, ImuRaw, ModelPrediction,
                            Parameters, Sample, SetupCheck, Step, StreamRate, ValveCommand, ValveReply)
 from ..models.shooting import ShootingModel
 from ..effects import effect_values
-from ..geometry import quat_from_matrix
+from ..geometry import quat_from_matrix, quat_from_rotvec, quat_multiply
 from ..params import PARAMETER_NAMES, ModelParameters, get_parameter
 from ..plans import CALIBRATION_SWEEP, Plan, PlanStep
 from ..config import RigConfig
@@ -270,14 +271,24 @@ class Session:
                                          jet_forces_n=(0.0, 0.0, 0.0)))
 
     async def _load_kernels(self) -> None:
-        """The first solve of a process loads the compiled kernels (about a second; far
-        longer on a busy machine): done before any valve is armed."""
-        await asyncio.to_thread(self.request.model.solve, np.zeros(3), self.params)
+        """Loads the compiled kernels a session will call, before any valve is armed: the
+        first call of each loads it (about a second) or, on a fresh checkout, compiles it
+        (seconds, far longer on a busy machine), holding the interpreter the valve
+        heartbeat needs. A solve and one online estimate (its sensitivity columns and
+        step, which the calibration's Jacobian uses too) reach every kernel."""
+        await asyncio.to_thread(self._call_every_kernel)
         if self.request.setup_checks:
             # The wiring check's model directions, at the profile's clamp pose: solved
             # here, as no solve may hold up the valve heartbeat once armed.
             self._predicted_bending = await asyncio.to_thread(
                 predicted_bending_rad, self.request.model, self.params, CheckSettings().force_n)
+
+    def _call_every_kernel(self) -> None:
+        rest = self.request.model.solve(np.zeros(3), self.params)
+        # A reading 2 degrees off the model's, so the estimator has a step to take.
+        reading = quat_multiply(rest.tip_sensor_quaternion(), quat_from_rotvec(np.array([0.035, 0.0, 0.0])))
+        warm_up = PathPredictor(self.request.model, self.params, OnlineSettings())
+        warm_up.step(np.zeros(3), reading, np.asarray(self.params.gravity_in_base_m_s2))
 
     # --- streams --------------------------------------------------------------------
 
