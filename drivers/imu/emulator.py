@@ -487,6 +487,10 @@ class Icm20948BusEmulator:
         (e.g. 0x71, an MPU-9250); default 0xEA.
     """
 
+    # No transaction waits on anything (nothing here sleeps): `AsyncIcm20948` reads it
+    # without a worker thread.
+    calls_block = False
+
     def __init__(
         self,
         plant: Plant,

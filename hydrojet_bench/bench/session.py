@@ -287,7 +287,12 @@ class Session:
             now = self.clock.now()
             if next_tick < now - period:
                 next_tick = now
-            await self.clock.sleep_until(next_tick)
+            if next_tick > now:
+                await self.clock.sleep_until(next_tick)
+            else:
+                # Behind: still give the loop a turn, as a stream whose reads never
+                # suspend (emulated IMUs) would otherwise starve the plan and heartbeat.
+                await asyncio.sleep(0)
             yield
 
     async def _em_stream(self, tracker: AuroraTracker) -> None:
