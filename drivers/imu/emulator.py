@@ -57,6 +57,8 @@ _MAX_RDWR_MESSAGES = 42
 _RESET_DURATION_S = 0.001
 # AK09916 datasheet: single measurement takes at most about 8 ms.
 _AK_SINGLE_MEASUREMENT_S = 0.008
+# Bank 0 registers a read clears (DS 8, I2C_MST_STATUS and INT_STATUS_1).
+_READ_TO_CLEAR = (reg.I2C_MST_STATUS, reg.INT_STATUS_1)
 _AK_VALID_MODES = {reg.AK_MODE_POWER_DOWN, reg.AK_MODE_SINGLE, 0x10, *reg.AK_CONTINUOUS_MODES_HZ}
 
 
@@ -442,17 +444,25 @@ class _EmulatedIcm20948:
     def read(self, register: int, length: int, now: float) -> bytes:
         self.tick(now)
         bank0 = self.banks[0]
+        end = register + length
+        if end <= reg.REG_BANK_SEL and (self.bank != 0 or not any(register <= r < end for r in _READ_TO_CLEAR)):
+            out = bytes(self.banks[self.bank][register:end])  # a sample burst: no wrap, no side effects
+        else:
+            out = self._read_bytewise(register, length)
+        if bank0[reg.INT_PIN_CFG] & reg.INT_PIN_CFG_INT_ANYRD_2CLEAR:
+            bank0[reg.INT_STATUS_1] = 0
+        return out
+
+    def _read_bytewise(self, register: int, length: int) -> bytes:
         out = bytearray()
         for _ in range(length):
             if register == reg.REG_BANK_SEL:
                 out.append(self.bank << reg.BANK_SHIFT)
             else:
                 out.append(self.banks[self.bank][register])
-                if self.bank == 0 and register in (reg.I2C_MST_STATUS, reg.INT_STATUS_1):
-                    bank0[register] = 0  # read-to-clear (DS 8, I2C_MST_STATUS and INT_STATUS_1)
+                if self.bank == 0 and register in _READ_TO_CLEAR:
+                    self.banks[0][register] = 0  # read-to-clear
             register = (register + 1) & 0x7F
-        if bank0[reg.INT_PIN_CFG] & reg.INT_PIN_CFG_INT_ANYRD_2CLEAR:
-            bank0[reg.INT_STATUS_1] = 0
         return bytes(out)
 
     _READ_ONLY = {
