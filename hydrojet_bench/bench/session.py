@@ -135,7 +135,7 @@ class SessionStatus:
     events: deque = field(default_factory=lambda: deque(maxlen=6))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class SessionResult:
     log_path: Path
     completed_steps: int
@@ -148,6 +148,13 @@ class SessionResult:
     steps: Dataset | None
     stream_rates: tuple[StreamRateFigure, ...] = ()  # over the whole session, one per stream that ran
     checks: tuple[CheckResult, ...] = ()  # the setup checks' outcomes (none when skipped)
+
+    def __repr__(self) -> str:
+        # Short: Python 3.11's asyncio.run formats its main task, result included, on
+        # the way out (signal handler restore): printing every settled row and solution
+        # took 0.44 s after a 12-step session (under cProfile), counted in its wall time.
+        return (f"SessionResult({str(self.log_path)!r}, {self.completed_steps}/{self.step_count} steps, "
+                f"{self.session_time_s:.1f} s session, {self.wall_time_s:.1f} s wall)")
 
 
 class Session:
