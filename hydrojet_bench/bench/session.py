@@ -127,6 +127,7 @@ class SessionStatus:
     remaining_session_s: float = 0.0
     ref_error_deg: float | None = None
     online_error_deg: float | None = None
+    errors_step_index: int = -1  # the step the two errors are of (estimates trail the plan)
     disturbance_norm_nm: float | None = None
     em_frames: int = 0
     em_missing: int = 0
@@ -455,6 +456,8 @@ class Session:
             status.remaining_session_s = remaining
             status.session_time_s = self.clock.now()
             await self._settle(index, step, self.clock.now(), min(timing.window_s, step.settle_s))
+            if index + 1 == len(request.plan):
+                await self._to_estimate.join()  # the plan is over: show its last step's errors
             self._log_step_rates()
             self.on_update(status)
         await self._finish_calibration()
@@ -586,6 +589,7 @@ class Session:
             self.status.disturbance_norm_nm = float(np.linalg.norm(moment))
             self.status.online_error_deg = estimate.online.orientation_error_deg
         self.status.ref_error_deg = estimate.ref.orientation_error_deg
+        self.status.errors_step_index = index
         log.write_transform(t_s, parent="base", child="tip_model",
                             rotation=quat_from_matrix(best.solution.tip_rotation_in_base),
                             translation_m=best.solution.tip_position_in_base_m)
