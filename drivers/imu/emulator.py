@@ -113,7 +113,10 @@ class _TruthFrame:
     field_ut: np.ndarray
 
 
-@njit(cache=True)
+# Compiled eagerly for any array layout, so no call during a session compiles a new one
+# (a second with the GIL held, while the valve heartbeat waits).
+@njit("Tuple((float64[::1], float64[::1], float64[::1]))(float64[:], float64[:, :], float64[:], float64[:], float64[:], "
+      "float64[:])", cache=True)
 def _imu_frame_truth(orientation_in_tracker: np.ndarray, mounting: np.ndarray, angular_velocity_in_sensor_rad_s: np.ndarray,
                      acceleration_in_tracker_m_s2: np.ndarray, gravity_in_tracker_m_s2: np.ndarray,
                      field_in_tracker_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

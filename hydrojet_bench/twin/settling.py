@@ -17,7 +17,10 @@ from numba import njit
 from ..geometry import _SMALL_ANGLE_RAD
 
 
-@njit(cache=True)
+# Compiled eagerly for any array layout (the segments' arrays are views of differing
+# layouts): a new layout met during a session would otherwise be compiled then, holding
+# the GIL for a second while the valve heartbeat waits.
+@njit("Tuple((float64[::1], float64[::1]))(float64[:], float64[:], float64[:], float64[:], float64)", cache=True)
 def settling_pose(target_orientation: np.ndarray, rotation_offset_rad: np.ndarray, target_position_m: np.ndarray,
                   position_offset_m: np.ndarray, decay: float) -> tuple[np.ndarray, np.ndarray]:
     """(4,) orientation and (3,) position (m) of one sensor at settling factor ``decay``
