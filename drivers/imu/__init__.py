@@ -3,7 +3,7 @@ magnetometer read through the chip's auxiliary I2C master.
 
 Layers: `registers` (datasheet register map), `codec` (one burst <-> `RawImuSample`,
 SI units), `driver` (`Icm20948`, synchronous register-level start-up and sampling over
-any `smbus2.SMBus`-like object), `async_driver` (worker thread + timeout for the bench),
+any `smbus2.SMBus`-like object), `async_driver` (worker thread + timeout for the bench; none on a bus that never blocks),
 `calibration` (gyro bias, hard/soft iron), `fusion` (the orientation filter seam with
 `imufusion` and `ahrs` Madgwick behind it, and the tip-relative-to-base rotation),
 `fusion_benchmark` (the filters scored on the emulator) and `emulator` (`Icm20948BusEmulator`, an SMBus stand-in

@@ -2,7 +2,8 @@
 
 I2C register access is short and blocking by nature, so this layer is synchronous; the
 bench runs it through `drivers.imu.async_driver.AsyncIcm20948`, which moves each call to
-a worker thread under a per-bus lock and bounds it with a timeout.
+a worker thread under a per-bus lock and bounds it with a timeout (sample reads on an
+emulated bus, which never blocks, stay on the caller's thread).
 
 Two chips share one bus (0x68 base, 0x69 tip) and both AK09916s answer at 0x0C on their
 chip's auxiliary bus. Bypass mode would put both at 0x0C on the host bus, so the driver
@@ -38,7 +39,8 @@ T = TypeVar("T")
 
 
 class SmbusLike(Protocol):
-    """The subset of `smbus2.SMBus` the driver uses (so an emulator or mock can stand in)."""
+    """The subset of `smbus2.SMBus` the driver uses (so an emulator or mock can stand in).
+    A bus whose calls never wait may also say ``calls_block = False`` (`async_driver`)."""
 
     def read_byte_data(self, i2c_addr: int, register: int) -> int: ...
 

@@ -58,7 +58,9 @@ class LiveView:
             f", step {step.step}"
         table.add_row("phase", f"{status.phase} ({where})")
         table.add_row("jets (N)", jets)
-        table.add_row("tip error (deg)", f"ref {_format(status.ref_error_deg)}   online {_format(status.online_error_deg)}")
+        of = "" if status.errors_step_index < 0 else f"   (step {status.errors_step_index + 1})"
+        table.add_row("tip error (deg)",
+                      f"ref {_format(status.ref_error_deg)}   online {_format(status.online_error_deg)}{of}")
         table.add_row("disturbance |w_d,m|", f"{_format(status.disturbance_norm_nm, 1e3)} mN m")
         table.add_row("EM tracker", f"{status.em_frames} frames, {status.em_missing} incomplete")
         table.add_row("IMUs", f"{status.imu_samples} samples, {status.imu_errors} errors")

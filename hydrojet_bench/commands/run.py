@@ -204,9 +204,11 @@ def _printer(console: Console, clipped: frozenset[int]):
             online = "-" if status.online_error_deg is None else f"{status.online_error_deg:.2f}"
             ref = "-" if status.ref_error_deg is None else f"{status.ref_error_deg:.2f}"
             flag = " (clipped to the valves' limit)" if status.step_index in clipped else ""
+            errors_of = status.errors_step_index
+            of = "" if errors_of in (-1, status.step_index) else f" (step {errors_of + 1})"
             console.print(f"step {status.step_index + 1}/{status.step_count} {status.phase}{flag}: "
                           f"tip error ref {ref} deg, "
-                          f"online {online} deg; EM {status.em_frames} frames, IMU {status.imu_samples} samples",
+                          f"online {online} deg{of}; EM {status.em_frames} frames, IMU {status.imu_samples} samples",
                           highlight=False, markup=False)
 
     return update

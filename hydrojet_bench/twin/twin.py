@@ -57,6 +57,7 @@ from ..params import JET_COUNT, ModelParameters, with_parameters
 from ..plans import Plan, PlanStep
 from .config import TwinConfig
 from .recording import TwinRecording
+from .settling import settling_pose
 
 SENSORS = ("base", "tip")
 SENSOR_CHOICES = ("em", "imu", "truth")
@@ -260,14 +261,16 @@ class DigitalTwin:
             raise ValueError(f"t_s must be finite, got {t_s!r}")
         with self._lock:
             segment = self._segment_at(t)
-            orientation, position = self._poses_in_segment(segment, np.array([t]))
-        decay = float(self._decay(np.array([t - segment.start_s]))[0])
+        decay = math.exp(-max(t - segment.start_s, 0.0) / self._tau_s) if self._tau_s > 0.0 else 0.0
+        orientation, position = settling_pose(segment.target_orientation[index], segment.rotation_offset_rad[index],
+                                              segment.target_position_m[index], segment.position_offset_m[index],
+                                              decay)
         if self._tau_s > 0.0:
             angular_velocity = -decay / self._tau_s * segment.rotation_offset_rad[index]
             acceleration = decay / self._tau_s**2 * segment.position_offset_m[index]
         else:
             angular_velocity = acceleration = np.zeros(3)
-        return SensorTruth(orientation[index, 0], position[index, 0], angular_velocity, acceleration)
+        return SensorTruth(orientation, position, angular_velocity, acceleration)
 
     # --- measurements ---------------------------------------------------------------
 

@@ -272,3 +272,19 @@ def test_equilibrium_reports_the_solution_being_approached():
 def test_bad_commands_are_refused(forces, message):
     with pytest.raises(ValueError, match=message):
         quiet_twin().command_jet_forces(forces, 0.0)
+
+
+@pytest.mark.parametrize("tau", [0.0, 0.4])
+def test_the_truth_at_one_instant_is_the_vectorised_pose(tau):
+    # sensor_truth (one instant, a compiled kernel, what the emulators ask) and
+    # sensor_poses (stacks of times, numpy) must be one law, before, during and after a move.
+    twin = quiet_twin(settle_time_constant_s=tau)
+    twin.command_jet_forces((0.08, 0.02, 0.0), 2.0)
+    twin.command_jet_forces((0.0, 0.0, 0.11), 2.3)  # while the first move still settles
+    times = np.array([0.0, 1.999, 2.0, 2.1, 2.3, 2.31, 2.5, 4.0, 50.0])
+    for sensor in ("base", "tip"):
+        orientations, positions = twin.sensor_poses(sensor, times)
+        for t_s, q, p in zip(times, orientations, positions):
+            truth = twin.sensor_truth(sensor, float(t_s))
+            np.testing.assert_allclose(truth.orientation_in_tracker, q, rtol=0.0, atol=1e-15)
+            np.testing.assert_allclose(truth.position_in_tracker_m, p, rtol=0.0, atol=1e-15)

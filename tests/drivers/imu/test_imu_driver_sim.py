@@ -321,3 +321,39 @@ def test_async_call_on_a_hung_bus_times_out(run_async: Callable[..., object]) ->
             await imu.read_sample()
 
     run_async(main)
+
+
+class ThreadRecordingBus(Icm20948BusEmulator):
+    """The emulator, noting which thread each burst read runs on."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self.read_threads: list[int] = []
+
+    def read_i2c_block_data(self, *args: object, **kwargs: object) -> list[int]:
+        self.read_threads.append(threading.get_ident())
+        return super().read_i2c_block_data(*args, **kwargs)  # type: ignore[arg-type]
+
+
+class BlockingRecordingBus(ThreadRecordingBus):
+    calls_block = True  # as a real bus: every call may wait on the wire
+
+
+@pytest.mark.parametrize(("bus_class", "on_loop_thread"), [(ThreadRecordingBus, True), (BlockingRecordingBus, False)])
+def test_sample_reads_take_a_worker_thread_unless_the_bus_never_blocks(
+        run_async: Callable[..., object], bus_class: type[ThreadRecordingBus], on_loop_thread: bool) -> None:
+    clock = VirtualClock()
+    bus = bus_class(StaticPlant(), clock)
+    imu = AsyncIcm20948(Icm20948(bus, 0x68, clock=clock, sleep=clock.sleep))
+
+    async def main() -> int:
+        await imu.initialize()
+        bus.read_threads.clear()
+        clock.sleep(imu.driver.sample_period_s)
+        sample = await imu.read_sample()
+        assert sample.mag_ut is not None
+        return threading.get_ident()
+
+    loop_thread = run_async(main)
+    assert imu.reads_inline is on_loop_thread
+    assert bus.read_threads and all((thread == loop_thread) is on_loop_thread for thread in bus.read_threads)
