@@ -229,7 +229,7 @@ def _twin_session():
 
 
 def _diagnose_figure(steps) -> dict:
-    """One `diagnose` of the twin session's 229 steps: ten candidates, the default
+    """One `diagnose` of the twin session's 229 steps: every library candidate (eleven), the default
     worker processes. A single run, not a median: it takes seconds, and perf must stay
     short."""
     from ..analysis.diagnosis import diagnose

@@ -12,7 +12,7 @@ out the other two repetitions (126 steps). Why this split:
   jet_gain for a jet whose gain no training step shows);
 * the held-out steps repeat training commands with fresh noise: an extra parameter that
   fits noise in training gains nothing there, which is what cross-validation is for;
-* one fit per candidate instead of one per fold keeps ten candidates within seconds.
+* one fit per candidate instead of one per fold keeps the library's candidates within seconds.
 
 Sweeps that never repeat are all held out (the model then trains on the calibration
 poses alone, the paper's own split). In the paper's protocol the training steps come
