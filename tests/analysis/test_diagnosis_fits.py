@@ -105,6 +105,22 @@ def test_stiffening_the_baseline_absorbed_into_e_is_found_by_the_profile_scan():
     assert_recovered(diagnosis, hidden)
 
 
+def test_a_prb_fit_carries_its_chain_discretization_in_its_standard_error():
+    # A 20-link chain is not the rod: on a rod bent across gravity the library study
+    # found PRB's parameters 1 to 3 % off, beyond their noise-only standard errors. The
+    # winner's error now includes the chain's discretization error, from a fit with
+    # twice the links, in the table, the JSON and the standard error.
+    hidden = {"gravity.weight_scale": 1.5}
+    diagnosis = diagnose(steps_with(hidden, HORIZONTAL, seed=0), "prb", candidates=candidates("gravity", "jet_gain"))
+    winner = diagnosis.winner
+    assert diagnosis.verdict == "gravity" and set(winner.discretization) == {"gravity.weight_scale"}
+    value, error = winner.parameters["gravity.weight_scale"]
+    print(value, error, winner.discretization)
+    assert error >= winner.discretization["gravity.weight_scale"] > 0.0
+    assert abs(value - 1.5) <= 2.0 * error
+    assert diagnosis.as_dict()["ranking"][0]["discretization_error"] == winner.discretization
+
+
 def test_clamp_play_at_the_old_bound_is_not_clipped_there(play_steps):
     diagnosis = diagnose(play_steps, "cosserat", candidates=candidates("base_hysteresis", "base_compliance"))
     assert diagnosis.verdict == "base_hysteresis" and diagnosis.winner.widened

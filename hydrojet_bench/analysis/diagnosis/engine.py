@@ -75,7 +75,7 @@ from ...geometry import rotation_angle_deg
 from ...params import ModelParameters
 from .evidence import (NOISE_GAP_PER_FLOOR, OnlineEvidence, cosine, hysteresis_gap_deg, online_evidence,
                        rmse_by_jet, rotation_between)
-from .fitting import Fit, Problem, fit, fit_candidates, refit_candidates, session_gravity
+from .fitting import Fit, Problem, discretization_errors, fit, fit_candidates, refit_candidates, session_gravity
 from .noise import NoiseFloor, estimate_noise_floor
 from .separate import SeparatingPose, separating_poses
 from .setup import SetupFix, fit_discrete, hypotheses, with_setup_stage
@@ -135,6 +135,9 @@ class CandidateResult:
     widened: bool = False
     # Every fitted parameter (the baseline's too): what `diagnose --export` writes.
     calibrated: dict[str, tuple[float, float]] = field(default_factory=dict)
+    # A PRB winner's discretization error per own parameter, already in its standard
+    # errors (`fitting.discretization_errors`).
+    discretization: dict[str, float] = field(default_factory=dict)
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -155,6 +158,7 @@ class CandidateResult:
             "rmse_by_jet_deg": self.rmse_by_jet_deg, "hysteresis_gap_deg": self.hysteresis_gap_deg,
             "residual_correlation": self.residual_correlation, "online_correlation": self.online_correlation,
             "evaluations": self.evaluations, "error": self.error,
+            "discretization_error": self.discretization,
         }
 
 
@@ -341,6 +345,7 @@ def diagnose(steps: Dataset, model_name: str = "cosserat", known_effects: Sequen
                                     fitted_first=(discrete, fit_discrete(problem, discrete))),
                              steps, lambda errors, best: _significantly_worse(errors, best, settings.significance))
     tried = discrete + setups + candidates
+    first = _with_discretization_errors(problem, first, tried)
     stages, current = [], first
     while (current.verdict not in (NONE, UNEXPLAINED) and current.remaining_excess
            and len(stages) + 1 < settings.depth):
@@ -353,10 +358,32 @@ def diagnose(steps: Dataset, model_name: str = "cosserat", known_effects: Sequen
         problem = _with_known(problem, (added,))
         known = known + (added,)
         say(f"{winner.name} joins the baseline; trying the rest on top of it")
-        current = _stage(problem, known, noise, current.winner_fit, remaining, settings, started, say)
+        current = _with_discretization_errors(
+            problem, _stage(problem, known, noise, current.winner_fit, remaining, settings, started, say), tried)
         stages.append(current)
     found = _found(first, stages)
     return replace(first, stages=tuple(stages), found=found, elapsed_s=time.perf_counter() - started)
+
+
+def _with_discretization_errors(problem: Problem, stage: Diagnosis, tried: Sequence[Effect]) -> Diagnosis:
+    """``stage`` with its winner's standard errors widened, in quadrature, by the PRB
+    chain's discretization error (`fitting.discretization_errors`; none for Cosserat)."""
+    winner = stage.winner
+    if problem.model_name != "prb" or winner is None or not winner.parameters or stage.winner_fit is None:
+        return stage
+    effect = next(c for c in tried if c.name == winner.effect)
+    errors = discretization_errors(problem, at_physical_limits(effect) if winner.widened else effect,
+                                   stage.winner_fit)
+    if not errors:
+        return stage
+    widened = {name: (value, float(np.hypot(error, errors.get(name, 0.0))))
+               for name, (value, error) in winner.parameters.items()}
+    updated = replace(winner, parameters=widened, calibrated={**winner.calibrated, **widened}, discretization=errors)
+
+    def swap(candidates: tuple[CandidateResult, ...]) -> tuple[CandidateResult, ...]:
+        return tuple(updated if candidate is winner else candidate for candidate in candidates)
+
+    return replace(stage, ranking=swap(stage.ranking), setup_ranking=swap(stage.setup_ranking))
 
 
 def _with_known(problem: Problem, effects: Sequence[Effect]) -> Problem:
