@@ -302,7 +302,8 @@ class Session:
         # A reading 2 degrees off the model's, so the estimator has a step to take.
         reading = quat_multiply(rest.tip_sensor_quaternion(), quat_from_rotvec(np.array([0.035, 0.0, 0.0])))
         warm_up = PathPredictor(self.request.model, self.params, OnlineSettings())
-        warm_up.step(np.zeros(3), reading, np.asarray(self.params.gravity_in_base_m_s2))
+        with contextlib.suppress(ConvergenceError):  # its kernels are loaded all the same
+            warm_up.step(np.zeros(3), reading, np.asarray(self.params.gravity_in_base_m_s2))
 
     # --- streams --------------------------------------------------------------------
 
