@@ -49,7 +49,8 @@ limits (`EffectParameter.limits`); a fit still on a bound is flagged (``at_bound
 
 Standard errors: from the scaled Jacobian at the optimum with the noise variance the
 diagnosis measured (not the fit's own residual variance, which a missing effect would
-inflate).
+inflate). A PRB chain is not the rod: a named effect's errors also carry the chain's
+discretization error (`discretization_errors`, added by the engine).
 """
 
 from __future__ import annotations
