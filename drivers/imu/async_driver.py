@@ -26,7 +26,7 @@ from typing import TypeVar
 
 from drivers.imu.calibration import GyroBiasEstimate, ImuSample
 from drivers.imu.codec import RawImuSample
-from drivers.imu.driver import Icm20948
+from drivers.imu.driver import FifoRead, Icm20948
 from drivers.imu.errors import ImuTimeoutError
 
 T = TypeVar("T")
@@ -82,6 +82,12 @@ class AsyncIcm20948:
 
     async def read_sample(self) -> ImuSample:
         return await self._read("read_sample", self.driver.read_sample)
+
+    async def enable_fifo(self) -> None:
+        await self._run("enable_fifo", self.driver.enable_fifo, self.init_timeout_s)
+
+    async def read_fifo(self) -> FifoRead:
+        return await self._read("read_fifo", self.driver.read_fifo)
 
     async def estimate_gyro_bias(self, sample_count: int = 200, **kwargs: float | bool) -> GyroBiasEstimate:
         call = functools.partial(self.driver.estimate_gyro_bias, sample_count, **kwargs)  # type: ignore[arg-type]

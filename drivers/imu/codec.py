@@ -11,6 +11,9 @@ copies the AK09916's ST1..ST2 into EXT_SLV_SENS_DATA (see `registers`):
     offset 21      TMPS            dummy
     offset 22      AK09916 ST2     (HOFL bit 3; bits 7 and 2:0 always zero)
 
+The FIFO (`registers.FIFO_EN_2_MOTION` with SLV0) holds the same 23 bytes per sample
+instant, oldest first: `decode_fifo` splits whole records and decodes each.
+
 There is no stream to resynchronise: an I2C register read either returns the requested
 number of bytes or fails, so the decoder is a plain function. It raises only
 `ImuProtocolError`: for a wrong length, for status bytes whose always-zero bits are set,
@@ -40,8 +43,7 @@ _ST1_ZERO_BITS = 0xFC
 _ST2_ZERO_BITS = 0x87
 _INT16_MAX = 32767
 _INT16_MIN = -32768
-# AK09916 output range is +-32752 LSB (+-4912 uT at 0.15 uT/LSB).
-_MAG_COUNT_LIMIT = 32752
+_MAG_COUNT_LIMIT = reg.MAG_COUNT_LIMIT
 
 
 @dataclass(frozen=True)
@@ -156,6 +158,20 @@ def decode_burst(data: bytes | bytearray | list[int], ranges: ImuRanges) -> RawI
         mag_data_overrun=bool(st1 & reg.AK_ST1_DOR),
         mag_overflow=overflow,
     )
+
+
+def decode_fifo(data: bytes | bytearray, ranges: ImuRanges) -> list[RawImuSample]:
+    """Decode whole `registers.FIFO_RECORD_LENGTH`-byte FIFO records, oldest first.
+
+    Raises ImuProtocolError when the length is not a whole number of records (the reader
+    lost the record boundary) or when any record fails `decode_burst`."""
+    if not isinstance(data, (bytes, bytearray)):
+        raise ImuProtocolError(f"FIFO data must be bytes, got {type(data).__name__}")
+    size = reg.FIFO_RECORD_LENGTH
+    if len(data) % size:
+        raise ImuProtocolError(f"FIFO data of {len(data)} bytes is not a whole number of {size}-byte records")
+    view = bytes(data)
+    return [decode_burst(view[start:start + size], ranges) for start in range(0, len(view), size)]
 
 
 def _counts(value: float, per_lsb: float, low: int, high: int) -> int:

@@ -11,6 +11,13 @@ keeps bypass off and reads each magnetometer through its own chip's I2C master: 
 single set-up transfers, SLV0 to copy ST1..ST2 into EXT_SLV_SENS_DATA at every sample.
 One burst from ACCEL_XOUT_H then returns everything (`codec`).
 
+At the rig's 100 Hz a host that reads one burst per sample loses every sample it is late
+for: the data registers hold only the newest. `enable_fifo` makes the chip queue one
+record per sample instant (the burst's 23 bytes) in its FIFO, and `read_fifo` drains the
+whole records in one transfer, so a host that is late by up to the FIFO's depth (22
+records, ~0.2 s at 102 Hz) loses nothing; one that is later loses what the FIFO held and
+is told (`FifoRead.overflowed`).
+
 Every transaction is retried a bounded number of times on OSError (a glitch on a long
 cable, EREMOTEIO on a missed ACK) before a typed error names the address.
 """
@@ -19,13 +26,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
 from smbus2 import i2c_msg
 
 from drivers.imu import registers as reg
 from drivers.imu.calibration import GyroBiasEstimate, ImuCalibration, ImuSample, estimate_gyro_bias
-from drivers.imu.codec import ImuRanges, RawImuSample, decode_burst
+from drivers.imu.codec import ImuRanges, RawImuSample, decode_burst, decode_fifo
 from drivers.imu.errors import (
     ImuAuxBusError,
     ImuBusError,
@@ -69,6 +77,29 @@ _RESET_POLL_S = 0.01
 # poll for up to ~100 ms.
 _AUX_POLLS = 50
 _AUX_POLL_S = 0.002
+
+
+@dataclass(frozen=True)
+class FifoRead:
+    """What one `Icm20948.read_fifo` drained. samples: calibrated, oldest first, stamped
+    one output period apart on the host clock (s); overflowed: the FIFO had filled, so
+    its content was dropped and it restarts empty (samples lost since the last read)."""
+
+    samples: tuple[ImuSample, ...]
+    overflowed: bool
+
+
+def sample_rate_divider_for(rate_hz: float) -> int:
+    """GYRO_SMPLRT_DIV whose output rate, 1125 Hz / (1 + divider), is nearest ``rate_hz``
+    at or above it (so a consumer asking for 100 Hz gets 102.3 Hz, never fewer)."""
+    if not 0 < rate_hz <= reg.BASE_SAMPLE_RATE_HZ:
+        raise ValueError(f"IMU rate must be in (0, {reg.BASE_SAMPLE_RATE_HZ:g}] Hz, got {rate_hz!r}")
+    return min(255, max(0, int(reg.BASE_SAMPLE_RATE_HZ / rate_hz) - 1))
+
+
+def output_rate_hz(rate_hz: float) -> float:
+    """The output rate (Hz) the chip runs at when ``rate_hz`` is asked (`sample_rate_divider_for`)."""
+    return reg.BASE_SAMPLE_RATE_HZ / (1 + sample_rate_divider_for(rate_hz))
 
 
 class Icm20948:
@@ -117,6 +148,8 @@ class Icm20948:
         # a failed transaction may or may not have reached the chip).
         self._bank: int | None = None
         self.initialized = False
+        # Host time of the newest FIFO record drained, None until the first read after a reset.
+        self._fifo_newest_t_s: float | None = None
 
     # --- properties -----------------------------------------------------------------
 
@@ -315,6 +348,72 @@ class Icm20948:
         """One burst, calibrated with `self.calibration`, stamped with `clock()`."""
         t_s = self.clock()
         return self.calibration.apply(self.read_raw(), t_s)
+
+    # --- the FIFO -------------------------------------------------------------------
+
+    def enable_fifo(self) -> None:
+        """Queue every sample in the FIFO: accel, gyro, temperature and the SLV0 copy of
+        the magnetometer per record, in snapshot mode (a full FIFO keeps its oldest
+        records and drops new ones, so what is queued stays in time order), emptied."""
+        self.write_register(0, reg.FIFO_EN_2, reg.FIFO_EN_2_MOTION)
+        self.write_register(0, reg.FIFO_EN_1, reg.FIFO_EN_1_SLV_0)
+        self.write_register(0, reg.FIFO_MODE, reg.FIFO_MODE_SNAPSHOT)
+        self.write_register(0, reg.USER_CTRL, reg.USER_CTRL_I2C_MST_EN | reg.USER_CTRL_FIFO_EN)
+        self.reset_fifo()
+
+    def reset_fifo(self) -> None:
+        """Empty the FIFO (assert, then release FIFO_RST) and clear its overflow flag."""
+        self.write_register(0, reg.FIFO_RST, reg.FIFO_RST_ASSERT)
+        self.write_register(0, reg.FIFO_RST, 0x00)
+        self.read_register(0, reg.INT_STATUS_2)
+        self._fifo_newest_t_s = None
+
+    def read_fifo(self) -> FifoRead:
+        """Drain the FIFO's whole records in one transfer, decoded and calibrated.
+
+        Stamps: the newest record was sampled within one output period before the host
+        clock at the start of the read. The first read after a reset stamps it half a
+        period before; later reads continue the previous stamps one period apart while
+        they stay in that window (so host jitter does not reach them) and move them to
+        its nearer edge when they leave it, which only shrinks their error (at most half
+        a period) and follows a chip clock that drifts from the host's.
+
+        An overflow (INT_STATUS_2, or a count that is not whole records) empties the
+        FIFO unread: a full snapshot-mode FIFO ends in a cut record, and once the host
+        pops records in front of it, new ones land after the cut, so no record boundary
+        in it can be trusted."""
+        t_s = self.clock()
+        overflowed = bool(self.read_register(0, reg.INT_STATUS_2) & reg.INT_STATUS_2_FIFO_OVERFLOW)
+        count_bytes = self.read_registers(0, reg.FIFO_COUNTH, 2)
+        records, partial = divmod(((count_bytes[0] & 0x1F) << 8) | count_bytes[1], reg.FIFO_RECORD_LENGTH)
+        if overflowed or partial:
+            self.reset_fifo()
+            return FifoRead((), overflowed=True)
+        if not records:
+            return FifoRead((), overflowed=False)
+        raw = decode_fifo(self._read_fifo_bytes(records * reg.FIFO_RECORD_LENGTH), self.ranges)
+        period = self.sample_period_s
+        newest = t_s - 0.5 * period  # the middle of where the newest record can be
+        if self._fifo_newest_t_s is not None:
+            newest = min(t_s, max(self._fifo_newest_t_s + records * period, t_s - period))
+        self._fifo_newest_t_s = newest
+        first = newest - (records - 1) * period
+        return FifoRead(tuple(self.calibration.apply(sample, first + index * period)
+                              for index, sample in enumerate(raw)), overflowed=False)
+
+    def _read_fifo_bytes(self, length: int) -> bytes:
+        """``length`` bytes popped from FIFO_R_W in one transfer (no retry: a failed
+        transfer may have popped some, so the caller's record boundary is gone)."""
+        self._select_bank_checked(0)
+        write = i2c_msg.write(self.address, [reg.FIFO_R_W])
+        read = i2c_msg.read(self.address, length)
+        try:
+            self.bus.i2c_rdwr(write, read)
+        except OSError as exc:
+            self._bank = None
+            self.reset_fifo()
+            raise ImuBusError(self.address, f"read {length} FIFO bytes", exc.errno, str(exc)) from exc
+        return bytes(read)
 
     def read_raw_series(self, count: int) -> list[RawImuSample]:
         """`count` raw samples, one per output period (waiting with `sleep`)."""

@@ -6,12 +6,15 @@ limits (32-byte SMBus blocks, `OSError(EREMOTEIO)` for an address nobody acknowl
 Per chip it models the four register banks and REG_BANK_SEL, reset and sleep, the gyro
 and accel output data rates (GYRO_SMPLRT_DIV, ACCEL_SMPLRT_DIV_1/2), INT_STATUS_1's
 raw-data-ready bit, the noise each DLPF setting lets through, read-to-clear
-I2C_MST_STATUS, and the auxiliary master on its own clock (LP_CONFIG.I2C_MST_CYC,
+I2C_MST_STATUS, the FIFO (FIFO_EN_1/2, USER_CTRL.FIFO_EN, FIFO_RST, stream and snapshot
+FIFO_MODE, FIFO_COUNTH/L, FIFO_R_W, INT_STATUS_2's overflow bit; one record per gyro
+sample instant, so a host that reads late still gets every sample up to the FIFO's
+512 bytes), and the auxiliary master on its own clock (LP_CONFIG.I2C_MST_CYC,
 I2C_MST_ODR_CONFIG) or on the gyro's: SLV0 (repeated transfer, reads land in
 EXT_SLV_SENS_DATA) and SLV4 (one transfer per enable, DONE / NACK status). The AK09916
 model has WIA1/WIA2, power-down / single / continuous modes, DRDY and DOR, ST2 release
 of the data registers, HOFL overflow, soft reset and the register auto-increment of its
-datasheet. Not modelled: FIFO, DMP, interrupt pins, bank 1, SLV1-3, self-test, the
+datasheet. Not modelled: DMP, FIFO watermarks, interrupt pins, bank 1, SLV1-3, self-test, the
 DLPF's delay (only its noise bandwidth).
 
 Data come from the plant's truth at each sample instant (plant time = `clock()`):
@@ -42,7 +45,7 @@ import numpy as np
 from numba import njit
 
 from drivers.imu import registers as reg
-from drivers.imu.codec import ImuRanges, Vector3, encode_ak09916_block, encode_mag_counts, encode_motion
+from drivers.imu.codec import ImuRanges, Vector3, encode_ak09916_block, encode_motion
 from drivers.plant import Plant
 from drivers.rotations import matrix_from_quat
 
@@ -57,8 +60,10 @@ _MAX_RDWR_MESSAGES = 42
 _RESET_DURATION_S = 0.001
 # AK09916 datasheet: single measurement takes at most about 8 ms.
 _AK_SINGLE_MEASUREMENT_S = 0.008
-# Bank 0 registers a read clears (DS 8, I2C_MST_STATUS and INT_STATUS_1).
-_READ_TO_CLEAR = (reg.I2C_MST_STATUS, reg.INT_STATUS_1)
+# Bank 0 registers a read clears (DS 8, I2C_MST_STATUS and INT_STATUS_1/2).
+_READ_TO_CLEAR = (reg.I2C_MST_STATUS, reg.INT_STATUS_1, reg.INT_STATUS_2)
+# Bank 0 registers whose read is not a plain copy of the register file.
+_READ_SPECIAL = (*_READ_TO_CLEAR, reg.FIFO_COUNTH, reg.FIFO_COUNTL, reg.FIFO_R_W)
 _AK_VALID_MODES = {reg.AK_MODE_POWER_DOWN, reg.AK_MODE_SINGLE, 0x10, *reg.AK_CONTINUOUS_MODES_HZ}
 
 
@@ -139,6 +144,50 @@ def _imu_frame_truth(orientation_in_tracker: np.ndarray, mounting: np.ndarray, a
             field[i] += r_ki * field_in_tracker_ut[k]
             omega[i] += mounting[k, i] * angular_velocity_in_sensor_rad_s[k]
     return specific_force, omega, field
+
+
+@njit(cache=True, inline="always")
+def _put_count(out: np.ndarray, offset: int, value: float, low: int, high: int) -> None:
+    """Nearest count, saturated like the sensor, as a big-endian int16 at ``offset``."""
+    count = min(high, max(low, int(round(value))))
+    count &= 0xFFFF
+    out[offset] = count >> 8
+    out[offset + 1] = count & 0xFF
+
+
+@njit("void(float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64, float64, "
+      "float64, float64, uint8[::1])", cache=True)
+def _motion_register_bytes(specific_force_m_s2: np.ndarray, angular_velocity_rad_s: np.ndarray,
+                           accel_gain: np.ndarray, gyro_gain: np.ndarray, gyro_bias_rad_s: np.ndarray,
+                           unit_noise: np.ndarray, accel_noise_m_s2: float, gyro_noise_rad_s: float,
+                           accel_m_s2_per_lsb: float, gyro_rad_s_per_lsb: float, out: np.ndarray) -> None:
+    """ACCEL_XOUT_H..GYRO_ZOUT_L (12 bytes into ``out``) of one sample: gain x truth (+ bias
+    for the gyro) + noise (``unit_noise``: 6 standard normals, accel then gyro), in counts.
+    Compiled: the FIFO asks for every sample instant of both chips (5000 per wall second
+    on a 25x rig), where `codec.encode_motion` and a dozen numpy calls cost ~15 us."""
+    for axis in range(3):
+        accel = accel_gain[axis] * specific_force_m_s2[axis] + accel_noise_m_s2 * unit_noise[axis]
+        gyro = (gyro_gain[axis] * angular_velocity_rad_s[axis] + gyro_bias_rad_s[axis]
+                + gyro_noise_rad_s * unit_noise[3 + axis])
+        _put_count(out, 2 * axis, accel / accel_m_s2_per_lsb, -32768, 32767)
+        _put_count(out, 6 + 2 * axis, gyro / gyro_rad_s_per_lsb, -32768, 32767)
+
+
+@njit("int64[::1](float64[::1], float64[:, ::1], float64[::1], float64[::1], float64[::1])", cache=True)
+def _mag_counts(field_ut: np.ndarray, soft_iron: np.ndarray, hard_iron_ut: np.ndarray, noise_ut: np.ndarray,
+                die_signs: np.ndarray) -> np.ndarray:
+    """AK09916 die-axis counts of M_soft B + hard + noise (field in the IMU frame, uT),
+    saturated at +-32752, and 1 in the last element when |X| + |Y| + |Z| >= 4912 uT (HOFL)."""
+    out = np.zeros(4, dtype=np.int64)
+    total = 0.0
+    for i in range(3):
+        measured = (soft_iron[i, 0] * field_ut[0] + soft_iron[i, 1] * field_ut[1] + soft_iron[i, 2] * field_ut[2]
+                    + hard_iron_ut[i] + noise_ut[i])
+        total += abs(measured)
+        out[i] = min(reg.MAG_COUNT_LIMIT, max(-reg.MAG_COUNT_LIMIT, int(round(die_signs[i] * measured
+                                                                              / reg.MAG_UT_PER_LSB))))
+    out[3] = 1 if total >= reg.MAG_OVERFLOW_SUM_UT else 0
+    return out
 
 
 class _EmulatedAk09916:
@@ -242,7 +291,9 @@ class _Grid:
 
     def advance(self, now: float, period_s: float) -> tuple[float, int] | None:
         """(newest instant <= now, periods since the last one returned), or None."""
-        index = math.floor((now - self.origin_s) / period_s)
+        # The margin: an instant computed as origin + k * period may land a rounding error
+        # short of k, and the FIFO asks at exactly those instants.
+        index = math.floor((now - self.origin_s) / period_s + 1e-9)
         if index <= self.index:
             return None
         steps = index - self.index
@@ -262,7 +313,16 @@ class _EmulatedIcm20948:
         self.mounting = mounting
         self.rng = np.random.default_rng([seed, address])
         self.bias_drift_rad_s = np.zeros(3)
+        self._accel_gain = 1.0 + np.asarray(model.accel_scale_error, dtype=float)
+        self._gyro_gain = 1.0 + np.asarray(model.gyro_scale_error, dtype=float)
+        self._temperature_bytes = encode_motion((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), model.temperature_degc,
+                                                ImuRanges())[12:14]
+        self._ranges: dict[tuple[int, int], ImuRanges] = {}
+        self._soft_iron = np.ascontiguousarray(model.mag_soft_iron, dtype=float)
+        self._hard_iron_ut = np.asarray(model.mag_hard_iron_ut, dtype=float)
+        self._die_signs = np.asarray(reg.MAG_AXIS_SIGNS_IN_IMU_FRAME, dtype=float)
         self.ak = _EmulatedAk09916(self._measure_mag)
+        self.fifo_size_bytes = owner.fifo_size_bytes
         self._power_on(owner.clock())
 
     # --- state ------------------------------------------------------------------------
@@ -276,6 +336,8 @@ class _EmulatedIcm20948:
         self.banks[2][reg.ACCEL_CONFIG] = 0x01
         self.bank = 0
         self.reset_until = now
+        self.fifo = bytearray()
+        self._fifo_last_byte = 0
         self._anchor_all(now)
 
     def _anchor_all(self, now: float) -> None:
@@ -311,10 +373,20 @@ class _EmulatedIcm20948:
             return None
         return (1 << (self.banks[3][reg.I2C_MST_ODR_CONFIG] & 0x0F)) / reg.BASE_SAMPLE_RATE_HZ
 
+    @property
+    def fifo_writing(self) -> bool:
+        """USER_CTRL.FIFO_EN with some source enabled and FIFO_RST not held."""
+        bank0 = self.banks[0]
+        return bool(bank0[reg.USER_CTRL] & reg.USER_CTRL_FIFO_EN and not bank0[reg.FIFO_RST] & reg.FIFO_RST_ASSERT
+                    and (bank0[reg.FIFO_EN_1] & 0x0F or bank0[reg.FIFO_EN_2] & reg.FIFO_EN_2_MOTION))
+
     def ranges(self) -> ImuRanges:
-        accel_fs = reg.ACCEL_FULL_SCALES[(self.banks[2][reg.ACCEL_CONFIG] >> 1) & 0x03][0]
-        gyro_fs = reg.GYRO_FULL_SCALES[(self.banks[2][reg.GYRO_CONFIG_1] >> 1) & 0x03][0]
-        return ImuRanges(accel_full_scale_g=accel_fs, gyro_full_scale_dps=gyro_fs)
+        key = ((self.banks[2][reg.ACCEL_CONFIG] >> 1) & 0x03, (self.banks[2][reg.GYRO_CONFIG_1] >> 1) & 0x03)
+        ranges = self._ranges.get(key)
+        if ranges is None:
+            ranges = self._ranges[key] = ImuRanges(accel_full_scale_g=reg.ACCEL_FULL_SCALES[key[0]][0],
+                                                   gyro_full_scale_dps=reg.GYRO_FULL_SCALES[key[1]][0])
+        return ranges
 
     def noise_std(self) -> tuple[float, float]:
         """(accel m/s^2, gyro rad/s) white noise per sample at the current DLPF settings."""
@@ -339,18 +411,12 @@ class _EmulatedIcm20948:
         return _TruthFrame(specific_force, omega, field)
 
     def gyro_bias_rad_s(self) -> np.ndarray:
-        return np.asarray(self.model.gyro_bias_rad_s) + self.bias_drift_rad_s
+        return np.asarray(self.model.gyro_bias_rad_s, dtype=float) + self.bias_drift_rad_s
 
     def _measure_mag(self, t: float) -> tuple[tuple[int, int, int], bool]:
-        m = self.model
-        true_field = self.truth(t).field_ut
-        measured = (
-            np.asarray(m.mag_soft_iron) @ true_field
-            + np.asarray(m.mag_hard_iron_ut)
-            + self.rng.normal(0.0, m.mag_noise_ut, 3)
-        )
-        overflow = float(np.sum(np.abs(measured))) >= reg.MAG_OVERFLOW_SUM_UT
-        return encode_mag_counts((float(measured[0]), float(measured[1]), float(measured[2]))), overflow
+        counts = _mag_counts(self.truth(t).field_ut, self._soft_iron, self._hard_iron_ut,
+                             self.rng.normal(0.0, self.model.mag_noise_ut, 3), self._die_signs)
+        return (int(counts[0]), int(counts[1]), int(counts[2])), bool(counts[3])
 
     def _sample_motion(self, accel_due: tuple[float, int] | None, gyro_due: tuple[float, int] | None) -> None:
         """Latch new accel and/or gyro (+ temperature) data for their own sample instants."""
@@ -359,26 +425,17 @@ class _EmulatedIcm20948:
         if gyro_due is not None:
             walk = m.gyro_bias_random_walk_rad_s_per_sqrt_s * math.sqrt(gyro_due[1] * self.period_s)
             self.bias_drift_rad_s = self.bias_drift_rad_s + self.rng.normal(0.0, walk, 3)
-        accel = gyro = np.zeros(3)
-        accel_frame = None if accel_due is None else self.truth(accel_due[0])
-        if accel_frame is not None:
-            accel = (1.0 + np.asarray(m.accel_scale_error)) * accel_frame.specific_force_m_s2 + self.rng.normal(
-                0.0, accel_noise, 3
-            )
-        if gyro_due is not None:
-            same_instant = accel_frame is not None and accel_due is not None and accel_due[0] == gyro_due[0]
-            frame = accel_frame if same_instant else self.truth(gyro_due[0])
-            gyro = (
-                (1.0 + np.asarray(m.gyro_scale_error)) * frame.angular_velocity_rad_s
-                + self.gyro_bias_rad_s()
-                + self.rng.normal(0.0, gyro_noise, 3)
-            )
-        motion = encode_motion(
-            (float(accel[0]), float(accel[1]), float(accel[2])),
-            (float(gyro[0]), float(gyro[1]), float(gyro[2])),
-            m.temperature_degc,
-            self.ranges(),
-        )
+        frame = self.truth(accel_due[0] if accel_due is not None else gyro_due[0])  # type: ignore[index]
+        if accel_due is not None and gyro_due is not None and accel_due[0] != gyro_due[0]:
+            gyro_frame = self.truth(gyro_due[0])
+        else:
+            gyro_frame = frame
+        ranges = self.ranges()
+        registers = np.empty(12, dtype=np.uint8)
+        _motion_register_bytes(frame.specific_force_m_s2, gyro_frame.angular_velocity_rad_s, self._accel_gain,
+                               self._gyro_gain, self.gyro_bias_rad_s(), self.rng.normal(0.0, 1.0, 6), accel_noise,
+                               gyro_noise, ranges.accel_m_s2_per_lsb, ranges.gyro_rad_s_per_lsb, registers)
+        motion = registers.tobytes()
         disabled = self.banks[0][reg.PWR_MGMT_2]
         data = self.banks[0]
         if accel_due is not None and not disabled & reg.PWR_MGMT_2_DISABLE_ACCEL:
@@ -386,7 +443,7 @@ class _EmulatedIcm20948:
         if gyro_due is not None:
             if not disabled & reg.PWR_MGMT_2_DISABLE_GYRO:
                 data[reg.GYRO_XOUT_H : reg.TEMP_OUT_H] = motion[6:12]
-            data[reg.TEMP_OUT_H : reg.EXT_SLV_SENS_DATA_00] = motion[12:14]
+            data[reg.TEMP_OUT_H : reg.EXT_SLV_SENS_DATA_00] = self._temperature_bytes
         data[reg.INT_STATUS_1] |= reg.INT_STATUS_1_RAW_DATA_0_RDY
 
     def _run_aux_master(self, now: float) -> None:
@@ -428,6 +485,12 @@ class _EmulatedIcm20948:
         if not self.awake:
             self.ak.update(now)
             return
+        if self.fifo_writing:
+            self._tick_every_instant(now)
+        else:
+            self._tick_newest(now)
+
+    def _tick_newest(self, now: float) -> None:
         gyro_due = self.gyro_grid.advance(now, self.period_s)
         accel_due = self.accel_grid.advance(now, self.accel_period_s)
         if gyro_due is not None or accel_due is not None:
@@ -442,13 +505,80 @@ class _EmulatedIcm20948:
         else:
             self.ak.update(now)
 
+    def _tick_every_instant(self, now: float) -> None:
+        """With the FIFO on, every gyro sample instant since the last look is sampled and
+        written to it, oldest first. Instants the FIFO has no room for (snapshot mode)
+        or would overwrite anyway (stream mode) only advance the registers."""
+        period = self.period_s
+        grid = self.gyro_grid
+        newest = math.floor((now - grid.origin_s) / period)
+        record_bytes = max(len(self._fifo_record()), 1)
+        first, last = grid.index + 1, newest
+        if self.banks[0][reg.FIFO_MODE] & reg.FIFO_MODE_SNAPSHOT:
+            # The oldest instants fill what is left (the last one partly); newer ones are lost.
+            last = min(last, grid.index + (self.fifo_size_bytes - len(self.fifo)) // record_bytes + 1)
+        else:
+            # Only the newest FIFO-full survives: older instants would be overwritten.
+            first = max(first, newest - self.fifo_size_bytes // record_bytes)
+        if first > grid.index + 1 or last < newest:
+            self._fifo_overflowed()
+        for index in range(first, last + 1):
+            self._tick_newest(grid.origin_s + index * period)
+            self._fifo_write(self._fifo_record())
+        self._tick_newest(now)
+
+    # --- FIFO -------------------------------------------------------------------------
+
+    def _fifo_record(self) -> bytes:
+        """The enabled sources' current register bytes, in register order (DS 4.16)."""
+        bank0 = self.banks[0]
+        enabled, slaves = bank0[reg.FIFO_EN_2], bank0[reg.FIFO_EN_1]
+        record = bytearray()
+        if enabled & reg.FIFO_EN_2_ACCEL:
+            record += bank0[reg.ACCEL_XOUT_H:reg.GYRO_XOUT_H]
+        for offset, bit in enumerate((reg.FIFO_EN_2_GYRO_X, reg.FIFO_EN_2_GYRO_Y, reg.FIFO_EN_2_GYRO_Z)):
+            if enabled & bit:
+                start = reg.GYRO_XOUT_H + 2 * offset
+                record += bank0[start:start + 2]
+        if enabled & reg.FIFO_EN_2_TEMP:
+            record += bank0[reg.TEMP_OUT_H:reg.EXT_SLV_SENS_DATA_00]
+        if slaves & reg.FIFO_EN_1_SLV_0:
+            length = self.banks[3][reg.I2C_SLV0_CTRL] & reg.I2C_SLV_LENG_MASK
+            record += bank0[reg.EXT_SLV_SENS_DATA_00:reg.EXT_SLV_SENS_DATA_00 + length]
+        return bytes(record)
+
+    def _fifo_overflowed(self) -> None:
+        self.banks[0][reg.INT_STATUS_2] |= reg.INT_STATUS_2_FIFO_OVERFLOW & 0x01
+
+    def _fifo_write(self, record: bytes) -> None:
+        room = self.fifo_size_bytes - len(self.fifo)
+        if len(record) <= room:
+            self.fifo += record
+            return
+        self._fifo_overflowed()
+        if self.banks[0][reg.FIFO_MODE] & reg.FIFO_MODE_SNAPSHOT:
+            self.fifo += record[:room]  # the bytes that fit, then nothing until a reset
+        else:
+            self.fifo += record
+            del self.fifo[:len(self.fifo) - self.fifo_size_bytes]  # the oldest go, records cut
+
+    def _fifo_pop(self, length: int) -> bytes:
+        """FIFO_R_W read: the oldest ``length`` bytes; an empty FIFO repeats the last byte."""
+        out = bytes(self.fifo[:length])
+        del self.fifo[:length]
+        if out:
+            self._fifo_last_byte = out[-1]
+        return out + bytes([self._fifo_last_byte]) * (length - len(out))
+
     # --- register access --------------------------------------------------------------
 
     def read(self, register: int, length: int, now: float) -> bytes:
         self.tick(now)
         bank0 = self.banks[0]
         end = register + length
-        if end <= reg.REG_BANK_SEL and (self.bank != 0 or not any(register <= r < end for r in _READ_TO_CLEAR)):
+        if self.bank == 0 and register == reg.FIFO_R_W:
+            out = self._fifo_pop(length)  # the address does not advance: every byte pops
+        elif end <= reg.REG_BANK_SEL and (self.bank != 0 or not any(register <= r < end for r in _READ_SPECIAL)):
             out = bytes(self.banks[self.bank][register:end])  # a sample burst: no wrap, no side effects
         else:
             out = self._read_bytewise(register, length)
@@ -461,6 +591,13 @@ class _EmulatedIcm20948:
         for _ in range(length):
             if register == reg.REG_BANK_SEL:
                 out.append(self.bank << reg.BANK_SHIFT)
+            elif self.bank == 0 and register == reg.FIFO_R_W:
+                out += self._fifo_pop(1)
+                continue  # FIFO_R_W does not advance the address
+            elif self.bank == 0 and register == reg.FIFO_COUNTH:
+                out.append((len(self.fifo) >> 8) & 0x1F)
+            elif self.bank == 0 and register == reg.FIFO_COUNTL:
+                out.append(len(self.fifo) & 0xFF)
             else:
                 out.append(self.banks[self.bank][register])
                 if self.bank == 0 and register in _READ_TO_CLEAR:
@@ -469,7 +606,8 @@ class _EmulatedIcm20948:
         return bytes(out)
 
     _READ_ONLY = {
-        0: {reg.WHO_AM_I, reg.I2C_MST_STATUS, reg.INT_STATUS_1,
+        0: {reg.WHO_AM_I, reg.I2C_MST_STATUS, reg.INT_STATUS_1, reg.INT_STATUS_2, reg.FIFO_COUNTH, reg.FIFO_COUNTL,
+            reg.FIFO_R_W,
             *range(reg.ACCEL_XOUT_H, reg.EXT_SLV_SENS_DATA_00 + reg.EXT_SLV_SENS_DATA_COUNT)},
         3: {reg.I2C_SLV4_DI},
     }
@@ -499,6 +637,8 @@ class _EmulatedIcm20948:
             return
         if self.bank == 0 and register == reg.USER_CTRL and value & reg.USER_CTRL_I2C_MST_RST:
             value &= ~reg.USER_CTRL_I2C_MST_RST & 0xFF  # self-clearing
+        if self.bank == 0 and register == reg.FIFO_RST and value & reg.FIFO_RST_ASSERT:
+            self.fifo.clear()
         bank[register] = value
         # A new divider restarts that sensor's output grid; the master's own clock runs on.
         if self.bank == 2 and register == reg.GYRO_SMPLRT_DIV:
@@ -520,6 +660,7 @@ class Icm20948BusEmulator:
         sensor frame (default identity: the IMU frame is the plant sensor frame).
     magnetic_disturbance_ut: sensor name -> extra field at that sensor, tracker frame (uT).
     seed: seeds the per-chip noise generators and the fault generator.
+    fifo_size_bytes: each chip's FIFO (default the datasheet's 512 bytes).
     fault_probability: chance that any transaction fails with OSError(EIO).
     who_am_i: address -> WHO_AM_I value, to emulate a different part at an address
         (e.g. 0x71, an MPU-9250); default 0xEA.
@@ -541,11 +682,15 @@ class Icm20948BusEmulator:
         seed: int = 0,
         fault_probability: float = 0.0,
         who_am_i: Mapping[int, int] | None = None,
+        fifo_size_bytes: int = reg.FIFO_SIZE_BYTES,
     ) -> None:
         if not 0.0 <= fault_probability <= 1.0:
             raise ValueError(f"fault_probability must be in [0, 1], got {fault_probability}")
+        if not 0 < fifo_size_bytes <= 0x1FFF:
+            raise ValueError(f"fifo_size_bytes must be 1..8191 (a 13-bit count), got {fifo_size_bytes}")
         self.plant = plant
         self.clock = clock
+        self.fifo_size_bytes = fifo_size_bytes
         self.who_am_i = dict(who_am_i or {})
         self._lock = threading.RLock()
         self._disturbance: dict[str, np.ndarray] = {}

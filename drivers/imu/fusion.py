@@ -20,6 +20,8 @@ gravity and the field directly (TRIAD).
 
 from __future__ import annotations
 
+from collections import deque
+
 from collections.abc import Sequence
 from typing import Literal, Protocol
 
@@ -210,3 +212,19 @@ class ImuPairFusion:
     def update(self, base: ImuSample, tip: ImuSample) -> np.ndarray:
         """Fuse one sample of each; returns q_base^-1 * q_tip (w, x, y, z)."""
         return tip_relative_to_base(self.base.update(base), self.tip.update(tip))
+
+
+def paired_samples(base: deque[ImuSample], tip: deque[ImuSample], period_s: float) -> list[tuple[ImuSample, ImuSample]]:
+    """Pop base/tip pairs sampled within half a period (s) of each other, oldest first.
+    A sample whose partner was lost (a FIFO overflow on one chip) is dropped; a sample
+    whose partner has not been read yet stays queued."""
+    pairs = []
+    while base and tip:
+        gap_s = tip[0].t_s - base[0].t_s
+        if gap_s > 0.5 * period_s:
+            base.popleft()
+        elif gap_s < -0.5 * period_s:
+            tip.popleft()
+        else:
+            pairs.append((base.popleft(), tip.popleft()))
+    return pairs

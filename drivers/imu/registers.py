@@ -30,6 +30,7 @@ BANK_COUNT = 4
 WHO_AM_I = 0x00
 WHO_AM_I_VALUE = 0xEA  # DS 8
 USER_CTRL = 0x03
+USER_CTRL_FIFO_EN = 0x40  # DS 8 bit 6: enable the FIFO
 USER_CTRL_I2C_MST_EN = 0x20  # DS 8 bit 5: enable the auxiliary I2C master
 USER_CTRL_I2C_MST_RST = 0x02  # DS 8 bit 1: reset the I2C master (self-clearing)
 LP_CONFIG = 0x05
@@ -49,6 +50,8 @@ INT_PIN_CFG_BYPASS_EN = 0x02  # DS 8 bit 1: aux bus bridged onto the host bus
 INT_PIN_CFG_INT_ANYRD_2CLEAR = 0x10  # DS 8 bit 4: any read clears the INT_STATUS bits
 INT_STATUS_1 = 0x1A  # DS 8: bit 0 RAW_DATA_0_RDY_INT, cleared by reading it
 INT_STATUS_1_RAW_DATA_0_RDY = 0x01
+INT_STATUS_2 = 0x1B  # DS 8: bits 4:0 FIFO_OVERFLOW_INT, cleared by reading it
+INT_STATUS_2_FIFO_OVERFLOW = 0x1F
 I2C_MST_STATUS = 0x17  # DS 8, read-to-clear
 I2C_MST_STATUS_SLV4_DONE = 0x40
 I2C_MST_STATUS_SLV4_NACK = 0x10
@@ -58,6 +61,26 @@ GYRO_XOUT_H = 0x33  # DS 8: gyro X/Y/Z, big-endian int16, 0x33-0x38
 TEMP_OUT_H = 0x39  # DS 8: big-endian int16, 0x39-0x3A
 EXT_SLV_SENS_DATA_00 = 0x3B  # DS 8: 24 bytes, 0x3B-0x52, filled by the I2C master
 EXT_SLV_SENS_DATA_COUNT = 24
+# The FIFO (DS 4.16, DS 8). Each write appends the enabled sources in register order
+# (accel, gyro X/Y/Z, temperature, then each enabled slave's EXT_SLV_SENS_DATA bytes),
+# one record per sample instant; the host pops bytes by reading FIFO_R_W.
+FIFO_EN_1 = 0x66  # DS 8: bit 0 SLV_0_FIFO_EN (bits 3:0 for SLV0..SLV3)
+FIFO_EN_1_SLV_0 = 0x01
+FIFO_EN_2 = 0x67  # DS 8: bit 4 ACCEL, bits 3:1 GYRO_Z/Y/X, bit 0 TEMP
+FIFO_EN_2_ACCEL = 0x10
+FIFO_EN_2_GYRO_Z = 0x08
+FIFO_EN_2_GYRO_Y = 0x04
+FIFO_EN_2_GYRO_X = 0x02
+FIFO_EN_2_TEMP = 0x01
+FIFO_RST = 0x68  # DS 8: bits 4:0; assert and de-assert to empty the FIFO
+FIFO_RST_ASSERT = 0x1F
+FIFO_MODE = 0x69  # DS 8: bits 4:0; 0 stream (a full FIFO drops its oldest bytes), 1 snapshot (drops new ones)
+FIFO_MODE_SNAPSHOT = 0x1F
+FIFO_COUNTH = 0x70  # DS 8: bits 4:0 = count bits 12:8 (bytes in the FIFO); reading it latches FIFO_COUNTL
+FIFO_COUNTL = 0x71
+FIFO_R_W = 0x72  # DS 8: each read pops the oldest byte (the address does not advance)
+# DS 4.16: a 512-byte FIFO. (Some report 4 KB on silicon; the emulator takes the datasheet.)
+FIFO_SIZE_BYTES = 512
 
 # --- user bank 2 (DS 10) ------------------------------------------------------------
 GYRO_SMPLRT_DIV = 0x00  # DS 10: ODR = 1.125 kHz / (1 + div); DS prints "1.1 kHz"
@@ -140,6 +163,7 @@ TEMP_OFFSET_DEGC = 21.0
 # |X| + |Y| + |Z| >= 4912 uT, and the data are then invalid.
 MAG_UT_PER_LSB = 0.15
 MAG_OVERFLOW_SUM_UT = 4912.0
+MAG_COUNT_LIMIT = 32752  # AK09916 output range, +-32752 LSB (+-4912 uT)
 # DS figure "orientation of axes of sensitivity and polarity of rotation": the AK09916 die's X axis matches the
 # accel/gyro X axis, its Y and Z axes point the opposite way. The codec multiplies by
 # these signs so every vector it returns is in the accel/gyro frame. (Not re-checked
@@ -180,6 +204,10 @@ def bank_select_value(bank: int) -> int:
 MOTION_BYTES = EXT_SLV_SENS_DATA_00 - ACCEL_XOUT_H  # 14
 BURST_START = ACCEL_XOUT_H
 BURST_LENGTH = MOTION_BYTES + AK_BURST_LENGTH  # 23
+# The FIFO record with accel, gyro, temperature and SLV0 enabled has the burst's layout.
+FIFO_EN_2_MOTION = FIFO_EN_2_ACCEL | FIFO_EN_2_GYRO_Z | FIFO_EN_2_GYRO_Y | FIFO_EN_2_GYRO_X | FIFO_EN_2_TEMP
+FIFO_RECORD_LENGTH = BURST_LENGTH
+FIFO_RECORDS = FIFO_SIZE_BYTES // FIFO_RECORD_LENGTH  # 22 whole records
 # smbus2.SMBus.read_i2c_block_data / write_i2c_block_data refuse more than 32 bytes
 # (I2C_SMBUS_BLOCK_MAX in linux/i2c.h); longer transfers need i2c_rdwr.
 SMBUS_BLOCK_MAX = 32

@@ -8,7 +8,7 @@ contract in pyproject.toml checks it).
 """
 
 from drivers.testing.faulty_transport import FaultyTransport
-from drivers.testing.scripted_bus import B, F, R, ScriptedBus, W, eio, nack
+from drivers.testing.scripted_bus import B, F, R, RW, ScriptedBus, W, eio, nack
 from drivers.testing.scripted_transport import ScriptedTransport, ScriptMismatch
 
-__all__ = ["B", "F", "FaultyTransport", "R", "ScriptMismatch", "ScriptedBus", "ScriptedTransport", "W", "eio", "nack"]
+__all__ = ["B", "F", "FaultyTransport", "R", "RW", "ScriptMismatch", "ScriptedBus", "ScriptedTransport", "W", "eio", "nack"]

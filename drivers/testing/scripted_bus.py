@@ -5,13 +5,14 @@ It knows nothing about any chip: it checks that the driver issues exactly the sc
 transactions in order and hands back the scripted replies, or raises the scripted
 OSError. A departure fails at once with `ScriptMismatch`.
 
-A script is a list of ``(call, reply)`` steps; `W`, `R`, `B` and `F` build them::
+A script is a list of ``(call, reply)`` steps; `W`, `R`, `B`, `RW` and `F` build them::
 
     bus = ScriptedBus([W(0x68, 0x7F, 0x00), R(0x68, 0x00, 0xEA), F(R(0x68, 0x00, 0), nack())])
 """
 
 from __future__ import annotations
 
+import ctypes
 import errno
 import os
 from collections.abc import Iterable
@@ -22,6 +23,8 @@ from drivers.testing.scripted_transport import ScriptMismatch
 # ("method name", *arguments): one bus transaction as the driver called it.
 Call = tuple[Any, ...]
 Step = tuple[Call, Any]
+# linux/i2c.h: the flag of a read message
+I2C_M_RD = 0x0001
 
 
 def nack() -> OSError:
@@ -49,6 +52,11 @@ def B(address: int, register: int, length: int, reply: bytes | BaseException) ->
     return ("read_i2c_block_data", address, register, length), reply
 
 
+def RW(address: int, register: int, length: int, reply: bytes | BaseException) -> Step:
+    """``i2c_rdwr``: write the register address, then read ``length`` bytes answering ``reply``."""
+    return ("i2c_rdwr", ((address, 0, 1), (address, I2C_M_RD, length))), reply
+
+
 def F(step: Step, error: BaseException) -> Step:
     """The same call, answered with an exception."""
     return step[0], error
@@ -57,8 +65,8 @@ def F(step: Step, error: BaseException) -> Step:
 class ScriptedBus:
     """An SMBus stand-in that checks the exact sequence of transactions.
 
-    ``i2c_rdwr`` is matched as ``("i2c_rdwr", ((addr, flags, length), ...))`` and leaves
-    the read messages as allocated (zeros)."""
+    ``i2c_rdwr`` is matched as ``("i2c_rdwr", ((addr, flags, length), ...))``; a bytes
+    reply fills its read message (`RW`), otherwise they stay as allocated (zeros)."""
 
     def __init__(self, script: Iterable[Step]) -> None:
         self.script = list(script)
@@ -87,7 +95,10 @@ class ScriptedBus:
         return list(self._next(("read_i2c_block_data", i2c_addr, register, length)))
 
     def i2c_rdwr(self, *messages: Any) -> None:
-        self._next(("i2c_rdwr", tuple((m.addr, m.flags, len(m)) for m in messages)))
+        reply = self._next(("i2c_rdwr", tuple((m.addr, m.flags, len(m)) for m in messages)))
+        if isinstance(reply, (bytes, bytearray)):
+            read = next(m for m in messages if m.flags & I2C_M_RD)
+            ctypes.memmove(read.buf, bytes(reply), len(read))
 
     def assert_done(self) -> None:
         """Fail unless every scripted transaction happened."""

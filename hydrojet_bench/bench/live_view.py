@@ -63,7 +63,8 @@ class LiveView:
                       f"ref {_format(status.ref_error_deg)}   online {_format(status.online_error_deg)}{of}")
         table.add_row("disturbance |w_d,m|", f"{_format(status.disturbance_norm_nm, 1e3)} mN m")
         table.add_row("EM tracker", f"{status.em_frames} frames, {status.em_missing} incomplete")
-        table.add_row("IMUs", f"{status.imu_samples} samples, {status.imu_errors} errors")
+        table.add_row("IMUs", f"{status.imu_samples} samples, {status.imu_errors} errors, "
+                      f"{status.imu_overflows} FIFO overflows")
         table.add_row("rates (last step)", "   ".join(
             f"{'[yellow]' if rate.below_warning else ''}{name} {rate.delivered_hz:.1f}/{rate.configured_hz:g} Hz"
             f"{'[/]' if rate.below_warning else ''}" for name, rate in status.stream_rates.items()) or "-")

@@ -16,7 +16,7 @@ from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
 
 from drivers.aurora.client import AuroraTracker
-from drivers.imu import AsyncIcm20948, Icm20948, ImuPairFusion
+from drivers.imu import AsyncIcm20948, Icm20948, ImuPairFusion, sample_rate_divider_for
 from drivers.valve.client import ValveController
 
 from ..config import SIM, RigConfig
@@ -31,8 +31,8 @@ EventSink = Callable[[str, str, str], None]
 
 @dataclass(frozen=True)
 class ImuPair:
-    """The base and tip ICM-20948s (gyro bias estimated when the profile asks) and the
-    Madgwick fusion of their samples."""
+    """The base and tip ICM-20948s (gyro bias estimated when the profile asks, then
+    queueing every sample in their FIFOs) and the fusion of their samples."""
 
     base: AsyncIcm20948
     tip: AsyncIcm20948
@@ -112,11 +112,15 @@ async def _open_imus(bus, settings: RigConfig, clock: Clock) -> ImuPair:
     for address, calibration in ((imu.base_address, imu.base.calibration()),
                                  (imu.tip_address, imu.tip.calibration())):
         driver = Icm20948(bus, address, clock=clock.now, calibration=calibration,
+                          sample_rate_divider=sample_rate_divider_for(imu.rate_hz),
                           sleep=lambda seconds: time.sleep(seconds / clock.time_scale))
         chip = AsyncIcm20948(driver, bus_lock=lock)
         await chip.initialize()
         if imu.gyro_bias_samples:
             await chip.estimate_gyro_bias(imu.gyro_bias_samples)  # applied to the driver's calibration
         chips.append(chip)
-    return ImuPair(chips[0], chips[1], ImuPairFusion(imu.rate_hz, fusion=imu.fusion, gain=imu.madgwick_gain,
+    for chip in chips:  # together, so both queues start at the same sample
+        await chip.enable_fifo()
+    rate_hz = chips[0].driver.sample_rate_hz
+    return ImuPair(chips[0], chips[1], ImuPairFusion(rate_hz, fusion=imu.fusion, gain=imu.madgwick_gain,
                                                      use_magnetometer=imu.use_magnetometer))

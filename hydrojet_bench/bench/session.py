@@ -1,7 +1,8 @@
 """One bench session: play a plan on the rig, estimate live, record everything.
 
-Tasks on one event loop: the EM stream and the IMU stream (each samples at its rate in
-session time, logs raw data and feeds the step recorders), the valve driver's own reader
+Tasks on one event loop: the EM stream (a frame per tick at its rate in session time) and
+the IMU stream (both chips' FIFOs drained every few samples, so a late turn of the loop
+costs no sample), each logging raw data and feeding the step recorders, the valve driver's own reader
 and heartbeat, the plan task and the estimation task. The plan task commands each step,
 holds it for its settle time, averages the end of the step and queues it for the
 estimation task, so the next step starts when this one's settle time ends:
@@ -35,7 +36,8 @@ import numpy as np
 
 from drivers.aurora.client import AuroraTracker
 from drivers.aurora.errors import AuroraError
-from drivers.imu import ImuError
+from drivers.imu import ImuError, ImuSample, output_rate_hz, paired_samples
+from drivers.imu.registers import FIFO_RECORDS
 from drivers.transport.base import TransportError
 from drivers.valve.client import ValveController, ValveError
 
@@ -65,6 +67,9 @@ from .stream_rates import StreamRateFigure, StreamRateMeter
 
 # Consecutive stream failures after which a device counts as lost and the session stops.
 MAX_CONSECUTIVE_FAILURES = 20
+# The IMU FIFOs are drained every this many output periods: a quarter of their 22
+# records, so a turn of the event loop can come ~17 samples late before one is lost.
+FIFO_DRAIN_SAMPLES = 5
 # Wall time a log record may arrive after the time it is stamped with (a sample written
 # after fusion, a prediction after its solve) and still be logged in time order.
 REORDER_WINDOW_WALL_S = 0.25
@@ -135,6 +140,7 @@ class SessionStatus:
     em_missing: int = 0
     imu_samples: int = 0
     imu_errors: int = 0
+    imu_overflows: int = 0  # FIFO reads that found samples lost (the host was too late)
     valve_commands: int = 0
     valve_retries: int = 0
     stream_rates: dict[str, StreamRateFigure] = field(default_factory=dict)  # over the last step, by stream
@@ -188,7 +194,7 @@ class Session:
         self._devices: SimulatedDevices | None = None
         self._stopping = False
         self._rates = {"em": StreamRateMeter("em", request.settings.tracker.rate_hz),
-                       "imu": StreamRateMeter("imu", request.settings.imu.rate_hz)}
+                       "imu": StreamRateMeter("imu", output_rate_hz(request.settings.imu.rate_hz))}
         self._rate_warned: set[str] = set()
         # Settled steps waiting for their estimate, in plan order (`_estimate_steps`).
         self._to_estimate: asyncio.Queue[tuple[int, Dataset, float]] = asyncio.Queue()
@@ -307,10 +313,11 @@ class Session:
 
     # --- streams --------------------------------------------------------------------
 
-    async def _periodic(self, meter: StreamRateMeter):
-        """Yield once per period of session time; a stream that falls behind skips the
-        missed ticks rather than bursting to catch up (``meter`` then shows it)."""
-        period = 1.0 / meter.configured_hz
+    async def _periodic(self, meter: StreamRateMeter, period_s: float | None = None):
+        """Yield once per ``period_s`` of session time (default: one per sample of
+        ``meter``'s rate); a stream that falls behind skips the missed ticks rather than
+        bursting to catch up (``meter`` then shows it)."""
+        period = period_s if period_s is not None else 1.0 / meter.configured_hz
         next_tick = self.clock.now()
         meter.start(next_tick)
         while not self._stopping:
@@ -374,37 +381,58 @@ class Session:
             self._write_sample("em", t_s, base.orientation, tip.orientation, base_p, tip_p)
 
     async def _imu_stream(self, imus: ImuPair) -> None:
-        base_chip, tip_chip, fusion = imus.base, imus.tip, imus.fusion
-        log = self._log
+        base_chip, tip_chip = imus.base, imus.tip
         failures = 0
-        meter = self._rates["imu"]
-        async for _ in self._periodic(meter):
+        period_s = base_chip.driver.sample_period_s
+        queued: dict[str, deque[ImuSample]] = {"base": deque(), "tip": deque()}
+        async for _ in self._periodic(self._rates["imu"], FIFO_DRAIN_SAMPLES * period_s):
             try:
-                base = await base_chip.read_sample()
-                tip = await tip_chip.read_sample()
+                base_read = await base_chip.read_fifo()
+                await asyncio.sleep(0)
+                reads = {"base": base_read, "tip": await tip_chip.read_fifo()}
                 failures = 0
             except ImuError as error:
                 failures += 1
                 self.status.imu_errors += 1
-                self.event("warning", "imu", f"sample lost: {error}")
+                self.event("warning", "imu", f"samples lost: {error}")
                 if failures >= MAX_CONSECUTIVE_FAILURES:
-                    raise SessionAborted(f"IMUs lost: {failures} samples failed in a row ({error})") from error
+                    raise SessionAborted(f"IMUs lost: {failures} reads failed in a row ({error})") from error
                 continue
-            meter.delivered()
-            self.status.imu_samples += 1
-            if self._check_accel is not None:
-                self._check_accel.append((base.t_s, np.asarray(base.accel_m_s2, dtype=float)))
-            for name, chip, sample in (("base", base_chip, base), ("tip", tip_chip, tip)):
-                log.write(ImuRaw(t_s=sample.t_s, sensor=name, address=chip.address,
-                                 accel_m_s2=floats(sample.accel_m_s2), gyro_rad_s=floats(sample.gyro_rad_s),
-                                 mag_ut=floats(sample.mag_ut), temperature_c=sample.temperature_degc))
-            tip_in_base = fusion.update(base, tip)
-            t_s = tip.t_s
-            base_q, tip_q = fusion.base.quaternion, fusion.tip.quaternion
-            log.write(ImuOrientation(t_s=t_s, base=floats(base_q), tip=floats(tip_q),
-                                     tip_in_base=floats(tip_in_base)))
-            self.imu.add(t_s, base_q, tip_q)
-            self._write_sample("imu", t_s, base_q, tip_q, None, None)
+            for name, read in reads.items():
+                queued[name].extend(read.samples)
+                if read.overflowed:
+                    self._imu_overflowed(name, period_s)
+            for base, tip in paired_samples(queued["base"], queued["tip"], period_s):
+                self._imu_pair(imus, base, tip)
+                # A turn for the others between pairs: the tracker answers one request per
+                # frame, and a whole batch at once would make it miss frames.
+                await asyncio.sleep(0)
+
+    def _imu_overflowed(self, sensor: str, period_s: float) -> None:
+        self.status.imu_overflows += 1
+        if self.status.imu_overflows == 1:
+            depth_s = FIFO_RECORDS * period_s
+            self.event("warning", "imu", f"{sensor} IMU's FIFO overflowed: the host read it more than "
+                       f"{depth_s:.2f} s of session time late and samples were lost (counted in the IMU rate)")
+
+    def _imu_pair(self, imus: ImuPair, base: ImuSample, tip: ImuSample) -> None:
+        """Log, fuse and record one base/tip pair of samples."""
+        log = self._log
+        self._rates["imu"].delivered()
+        self.status.imu_samples += 1
+        if self._check_accel is not None:
+            self._check_accel.append((base.t_s, np.asarray(base.accel_m_s2, dtype=float)))
+        for name, chip, sample in (("base", imus.base, base), ("tip", imus.tip, tip)):
+            log.write(ImuRaw(t_s=sample.t_s, sensor=name, address=chip.address,
+                             accel_m_s2=floats(sample.accel_m_s2), gyro_rad_s=floats(sample.gyro_rad_s),
+                             mag_ut=floats(sample.mag_ut), temperature_c=sample.temperature_degc))
+        fusion = imus.fusion
+        tip_in_base = fusion.update(base, tip)
+        t_s = tip.t_s
+        base_q, tip_q = fusion.base.quaternion, fusion.tip.quaternion
+        log.write(ImuOrientation(t_s=t_s, base=floats(base_q), tip=floats(tip_q), tip_in_base=floats(tip_in_base)))
+        self.imu.add(t_s, base_q, tip_q)
+        self._write_sample("imu", t_s, base_q, tip_q, None, None)
 
     def _write_sample(self, source: str, t_s: float, base_q, tip_q, base_p, tip_p) -> None:
         if self._check_recorder is not None:

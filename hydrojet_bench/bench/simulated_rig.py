@@ -35,8 +35,10 @@ _instances = itertools.count()
 
 
 class SessionPlant:
-    """`drivers.plant.Plant` over a twin, stamped with session time whatever clock the
-    emulator calling it runs on."""
+    """`drivers.plant.Plant` over a twin at session time. The tracker and IMU emulators run
+    on the session clock, so their instants pass through (an IMU FIFO asks for instants
+    a little in the past); the valve emulator runs on the wall clock (its watchdog), so
+    its commands are stamped with session time here."""
 
     def __init__(self, twin: DigitalTwin, clock: Clock) -> None:
         self.twin = twin
@@ -45,7 +47,7 @@ class SessionPlant:
         self.magnetic_field_in_tracker_ut = twin.magnetic_field_in_tracker_ut
 
     def sensor_truth(self, sensor: str, t_s: float) -> SensorTruth:
-        return self.twin.sensor_truth(sensor, self.clock.now())
+        return self.twin.sensor_truth(sensor, t_s)
 
     def apply_valve_duties(self, duties_permille: Sequence[int], t_s: float) -> None:
         self.twin.apply_valve_duties(duties_permille, self.clock.now())

@@ -13,6 +13,7 @@ import pytest
 from msgspec.structs import replace
 
 from hydrojet_bench.bench.replay import live_difference_deg, read_session, replay
+from drivers.imu import output_rate_hz
 from drivers.transport.sim import unregister_device
 from hydrojet_bench.bench.session import Session, SessionAborted, SessionRequest
 from hydrojet_bench.model_choice import build_model
@@ -178,24 +179,39 @@ def test_a_session_with_an_effect_logs_its_parameters(tmp_path):
 
 
 def test_a_stream_below_its_configured_rate_is_measured_logged_and_warned(tmp_path):
-    """An IMU rate no host can keep (a read per 0.1 ms of session time, 1 us of wall time
-    at x10) must show as delivered below configured, in the result, the log and a warning."""
+    """A tracker rate no host can keep (a frame request per 0.1 ms of session time, 10 us
+    of wall time at x10) must show as delivered below configured, in the result, the log
+    and a warning."""
     log_path = tmp_path / "slow.mcap"
     request = make_request(log_path, plan=validation_sweeps(steps_up=1, repetitions=1, settle_s=SETTLE_S),
                            calibrate=False)
-    settings = replace(request.settings, imu=replace(request.settings.imu, rate_hz=10_000.0))
+    settings = replace(request.settings, tracker=replace(request.settings.tracker, rate_hz=10_000.0))
     result = asyncio.run(run_without_leaks(Session(dataclasses.replace(request, settings=settings))))
     rates = {rate.stream: rate for rate in result.stream_rates}
-    assert rates["imu"].below_warning and rates["imu"].fraction < 0.5
-    assert rates["imu"].samples > 0 and rates["imu"].configured_hz == 10_000.0
+    assert rates["em"].below_warning and rates["em"].fraction < 0.5
+    assert rates["em"].samples > 0 and rates["em"].configured_hz == 10_000.0
     contents = read_log(log_path)
     logged = [m for m in contents.messages if m.topic == "/bench/stream_rate"]
     assert {m.stream for m in logged if m.whole_session} == {"em", "imu"}
-    assert len([m for m in logged if not m.whole_session and m.stream == "imu"]) == len(request.plan)
+    assert len([m for m in logged if not m.whole_session and m.stream == "em"]) == len(request.plan)
     warnings = [m.message for m in contents.messages
-                if m.topic == "/events" and m.level == "warning" and m.source == "imu"]
-    assert any(w.startswith("falling behind: imu stream delivered") for w in warnings), warnings
-    assert any(w.startswith("below its configured rate: imu stream") for w in warnings), warnings
+                if m.topic == "/events" and m.level == "warning" and m.source == "em"]
+    assert any(w.startswith("falling behind: em stream delivered") for w in warnings), warnings
+    assert any(w.startswith("below its configured rate: em stream") for w in warnings), warnings
+
+
+def test_imu_samples_keep_their_rate_through_the_fifo(finished_session):
+    """Every IMU sample reaches the log at the chips' output rate, stamped one period
+    apart, whatever the turns of the event loop (the FIFO holds what a late turn misses)."""
+    session, result = finished_session
+    rates = {rate.stream: rate for rate in result.stream_rates}
+    assert rates["imu"].configured_hz == pytest.approx(output_rate_hz(session.request.settings.imu.rate_hz))
+    assert rates["imu"].fraction > 0.95
+    stamps = np.array([m.t_s for m in read_log(session.request.log_path).messages
+                       if m.topic == "/imu/raw" and m.sensor == "tip"])
+    gaps = np.diff(stamps) * rates["imu"].configured_hz
+    assert np.median(gaps) == pytest.approx(1.0, abs=1e-6)
+    assert np.all(gaps > 0)
 
 
 def test_log_is_written_in_time_order(finished_session):

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drivers.imu import registers as reg
-from drivers.imu.codec import ImuRanges, RawImuSample, decode_burst, encode_burst
+from drivers.imu.codec import ImuRanges, RawImuSample, decode_burst, decode_fifo, encode_burst
 from drivers.imu.errors import ImuProtocolError
 
 G = 9.80665
@@ -180,3 +180,34 @@ def test_any_23_bytes_either_decode_or_raise_protocol_error(data: bytes, ranges:
     sample = decode_burst(data, ranges)
     assert sample.mag_overflow == bool(st2 & 0x08)
     assert (sample.mag_ut is None) == sample.mag_overflow
+
+
+def test_fifo_records_decode_oldest_first() -> None:
+    records = burst(accel=(8192, 0, 0)) + burst(accel=(0, 8192, 0)) + burst(accel=(0, 0, 8192))
+    samples = decode_fifo(records, ImuRanges(accel_full_scale_g=4))
+    assert [s.accel_m_s2 for s in samples] == [pytest.approx(v) for v in ((G, 0, 0), (0, G, 0), (0, 0, G))]
+    assert decode_fifo(b"", ImuRanges()) == []
+
+
+@pytest.mark.parametrize("length", [1, 22, 24, 45, 47])
+def test_fifo_data_cut_mid_record_raises_protocol_error(length: int) -> None:
+    with pytest.raises(ImuProtocolError, match="whole number of 23-byte records"):
+        decode_fifo(bytes(length), ImuRanges())
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(samples_and_ranges(), min_size=1, max_size=8))
+def test_fifo_round_trip_matches_one_burst_per_record(cases: list[tuple[RawImuSample, ImuRanges]]) -> None:
+    ranges = cases[0][1]
+    data = b"".join(encode_burst(sample, ranges) for sample, _ in cases)
+    assert decode_fifo(data, ranges) == [decode_burst(encode_burst(s, ranges), ranges) for s, _ in cases]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.binary(max_size=120), st.sampled_from(ALL_RANGES))
+def test_arbitrary_fifo_bytes_raise_only_protocol_error(data: bytes, ranges: ImuRanges) -> None:
+    try:
+        samples = decode_fifo(data, ranges)
+    except ImuProtocolError:
+        return
+    assert len(samples) * 23 == len(data)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import math
 import struct
 
 import pytest
@@ -17,7 +18,7 @@ from drivers.imu.errors import (
     ImuNotFoundError,
     ImuProtocolError,
 )
-from drivers.testing import B, F, R, ScriptedBus, W, eio, nack
+from drivers.testing import B, F, R, RW, ScriptedBus, W, eio, nack
 
 
 def make(bus: ScriptedBus, address: int = 0x68, **kwargs: object) -> tuple[Icm20948, VirtualClock]:
@@ -182,4 +183,72 @@ def test_constructor_validates_its_arguments() -> None:
     with pytest.raises(ValueError, match="retries"):
         Icm20948(bus, retries=-1)
     assert Icm20948(bus, sample_rate_divider=10).sample_rate_hz == pytest.approx(1125 / 11)
+    bus.assert_done()
+
+
+def fifo_records(count: int) -> bytes:
+    return b"".join(struct.pack(">7h", 0, 0, 8192, index, 0, 0, 0) + struct.pack("<BhhhBB", 1, 100, 0, -300, 0, 0)
+                    for index in range(count))
+
+
+def enable_fifo_script(a: int = 0x68) -> list:
+    return [
+        W(a, 0x67, 0x1F),  # FIFO_EN_2: accel, gyro X/Y/Z, temperature
+        W(a, 0x66, 0x01),  # FIFO_EN_1: SLV0
+        W(a, 0x69, 0x1F),  # FIFO_MODE: snapshot
+        W(a, 0x03, 0x60),  # USER_CTRL: FIFO_EN | I2C_MST_EN
+        W(a, 0x68, 0x1F), W(a, 0x68, 0x00),  # FIFO_RST assert, release
+        R(a, 0x1B, 0x00),  # INT_STATUS_2: clear a stale overflow
+    ]
+
+
+def test_fifo_read_is_status_count_then_one_transfer_of_whole_records() -> None:
+    script = init_script() + enable_fifo_script() + [
+        R(0x68, 0x1B, 0x00),  # no overflow
+        B(0x68, 0x70, 2, bytes([0x00, 3 * 23])),  # FIFO_COUNTH/L: 69 bytes
+        RW(0x68, 0x72, 3 * 23, fifo_records(3)),  # FIFO_R_W, one transfer
+    ]
+    bus = ScriptedBus(script)
+    driver, clock = make(bus)
+    driver.initialize()
+    driver.enable_fifo()
+    read = driver.read_fifo()
+    bus.assert_done()
+    assert not read.overflowed
+    assert [s.gyro_rad_s[0] for s in read.samples] == pytest.approx([math.radians(i / 65.5) for i in range(3)])
+    # oldest first, one output period apart, the newest half a period before the read
+    stamps = [s.t_s for s in read.samples]
+    assert stamps[-1] == pytest.approx(clock() - driver.sample_period_s / 2)
+    assert stamps[1] - stamps[0] == pytest.approx(driver.sample_period_s)
+
+
+@pytest.mark.parametrize(("status", "count"), [(0x01, 512), (0x01, 23), (0x00, 23 + 5)])
+def test_fifo_overflow_or_a_cut_record_empties_the_fifo_unread(status: int, count: int) -> None:
+    script = init_script() + enable_fifo_script() + [
+        R(0x68, 0x1B, status),  # FIFO_OVERFLOW_INT
+        B(0x68, 0x70, 2, bytes([count >> 8, count & 0xFF])),
+        W(0x68, 0x68, 0x1F), W(0x68, 0x68, 0x00), R(0x68, 0x1B, 0x00),  # reset, no FIFO_R_W read
+    ]
+    bus = ScriptedBus(script)
+    driver, _ = make(bus)
+    driver.initialize()
+    driver.enable_fifo()
+    read = driver.read_fifo()
+    bus.assert_done()
+    assert read.overflowed and read.samples == ()
+
+
+def test_failed_fifo_transfer_resets_the_fifo_and_names_the_address() -> None:
+    script = init_script() + enable_fifo_script() + [
+        R(0x68, 0x1B, 0x00),
+        B(0x68, 0x70, 2, bytes([0x00, 46])),
+        F(RW(0x68, 0x72, 46, b""), eio()),
+        W(0x68, 0x7F, 0x00), W(0x68, 0x68, 0x1F), W(0x68, 0x68, 0x00), R(0x68, 0x1B, 0x00),
+    ]
+    bus = ScriptedBus(script)
+    driver, _ = make(bus)
+    driver.initialize()
+    driver.enable_fifo()
+    with pytest.raises(ImuBusError, match=r"0x68: read 46 FIFO bytes"):
+        driver.read_fifo()
     bus.assert_done()

@@ -1,0 +1,153 @@
+"""The FIFO against the SIMULATION (bus emulator + plant, virtual time): every sample
+instant is queued and sampled at its own instant, a late host loses nothing within the
+FIFO's depth and is told when it loses more, and stamps stay one period apart."""
+
+from __future__ import annotations
+
+import errno
+import math
+
+import numpy as np
+import pytest
+from imu_test_support import VirtualClock
+from test_imu_driver_sim import WobblingPlant, rig
+
+from drivers.imu import FifoRead, Icm20948, Icm20948BusEmulator, ImuBusError, sample_rate_divider_for
+from drivers.imu import registers as reg
+
+
+def started(plant: object | None = None, **emulator_kwargs: object) -> tuple[Icm20948BusEmulator, VirtualClock,
+                                                                          Icm20948]:
+    emulator, clock, driver = rig(plant, **emulator_kwargs)
+    imu = driver(0x69)
+    imu.initialize()
+    imu.enable_fifo()
+    return emulator, clock, imu
+
+
+def test_every_instant_since_the_last_read_is_delivered_in_order() -> None:
+    emulator, clock, imu = started()
+    period = imu.sample_period_s
+    delivered = []
+    for wait in (0.0331, 0.1, 0.0079, 0.0512, 0.2):  # all within the FIFO's 22 records
+        clock.sleep(wait)
+        read = imu.read_fifo()
+        assert not read.overflowed
+        delivered.extend(read.samples)
+    elapsed = 0.0331 + 0.1 + 0.0079 + 0.0512 + 0.2
+    assert abs(len(delivered) - elapsed / period) <= 1.0
+    # stamped within half a period of the instant each was sampled at
+    stamps = np.array([s.t_s for s in delivered])
+    grid = emulator.chips[0x69].gyro_grid
+    true_instants = grid.origin_s + (grid.index - np.arange(len(stamps))[::-1]) * period
+    assert np.all(np.diff(stamps) > 0)
+    assert np.max(np.abs(stamps - true_instants)) <= period / 2 + 1e-9
+    assert all(s.accel_m_s2[2] == pytest.approx(9.81, abs=0.1) for s in delivered)
+
+
+def test_each_record_is_sampled_at_its_own_instant() -> None:
+    # A 2 Hz swing read every 0.15 s: if the emulator sampled at the read, the gyro would
+    # be the same across a batch; it must follow the plant's rate sample by sample.
+    plant = WobblingPlant(start_s=0.0)
+    _, clock, imu = started(plant, error_models=None, seed=3)
+    samples = []
+    for _ in range(8):
+        clock.sleep(0.15)
+        samples.extend(imu.read_fifo().samples)
+    gyro = np.array([s.gyro_rad_s[0] for s in samples])
+    truth = np.array([plant.sensor_truth("tip", s.t_s).angular_velocity_in_sensor_rad_s[0] for s in samples])
+    # bias (~0.006 rad/s), noise and DLPF-free sampling: within 0.05 of a 2.5 rad/s swing
+    assert np.max(np.abs(gyro - truth)) < 0.05 + imu.sample_period_s * 0.2 * (2 * math.pi * 2) ** 2
+
+
+def test_a_host_later_than_the_fifo_is_told_and_recovers() -> None:
+    _, clock, imu = started()
+    clock.sleep(1.0)  # 102 instants, 22 records fit
+    read = imu.read_fifo()
+    assert read.overflowed and read.samples == ()
+    clock.sleep(0.05)
+    after = imu.read_fifo()
+    assert not after.overflowed and 4 <= len(after.samples) <= 6
+    assert after.samples[-1].t_s <= clock()
+
+
+def test_a_larger_fifo_holds_more() -> None:
+    _, clock, imu = started(fifo_size_bytes=4096)
+    clock.sleep(1.0)
+    read = imu.read_fifo()
+    assert not read.overflowed and len(read.samples) == pytest.approx(102, abs=1)
+
+
+def test_stream_mode_keeps_the_newest_bytes_and_flags_the_overflow() -> None:
+    emulator, clock, imu = started()
+    imu.write_register(0, reg.FIFO_MODE, 0x00)
+    clock.sleep(1.0)
+    assert emulator.read_byte_data(0x69, reg.INT_STATUS_2) & 0x01
+    assert emulator.read_byte_data(0x69, reg.INT_STATUS_2) == 0  # read to clear
+    count = emulator.read_i2c_block_data(0x69, reg.FIFO_COUNTH, 2)
+    assert (count[0] << 8) | count[1] == reg.FIFO_SIZE_BYTES
+
+
+def test_fifo_r_w_pops_and_an_empty_fifo_repeats_its_last_byte() -> None:
+    emulator, clock, imu = started()
+    clock.sleep(imu.sample_period_s * 1.5)
+    record = emulator.read_i2c_block_data(0x69, reg.FIFO_R_W, 23)
+    assert emulator.read_i2c_block_data(0x69, reg.FIFO_R_W, 3) == [record[-1]] * 3
+    assert emulator.read_i2c_block_data(0x69, reg.FIFO_COUNTH, 2) == [0, 0]
+
+
+def test_fifo_reset_empties_it_and_holding_it_stops_writes() -> None:
+    emulator, clock, imu = started()
+    clock.sleep(0.1)
+    emulator.write_byte_data(0x69, reg.FIFO_RST, reg.FIFO_RST_ASSERT)
+    assert emulator.read_i2c_block_data(0x69, reg.FIFO_COUNTH, 2) == [0, 0]
+    clock.sleep(0.1)
+    assert emulator.read_i2c_block_data(0x69, reg.FIFO_COUNTH, 2) == [0, 0]
+    emulator.write_byte_data(0x69, reg.FIFO_RST, 0)
+    clock.sleep(0.1)
+    assert emulator.read_i2c_block_data(0x69, reg.FIFO_COUNTH, 2)[1] > 0
+
+
+def test_a_bus_fault_mid_drain_costs_that_batch_only() -> None:
+    emulator, clock, imu = started()
+    clock.sleep(0.1)
+    imu.read_fifo()
+    clock.sleep(0.1)
+    transfer = emulator.i2c_rdwr
+
+    def failing_once(*messages: object) -> None:
+        emulator.i2c_rdwr = transfer  # type: ignore[method-assign]
+        raise OSError(errno.EIO, "I/O error")
+
+    emulator.i2c_rdwr = failing_once  # type: ignore[method-assign]
+    with pytest.raises(ImuBusError, match="0x69: read .* FIFO bytes"):
+        imu.read_fifo()
+    clock.sleep(0.1)
+    read = imu.read_fifo()
+    assert not read.overflowed and len(read.samples) >= 9
+
+
+@pytest.mark.parametrize(("rate_hz", "expected_hz"), [(100.0, 102.27), (10.0, 10.04), (1125.0, 1125.0), (1.0, 4.39)])
+def test_rate_divider_gives_at_least_the_rate_asked(rate_hz: float, expected_hz: float) -> None:
+    divider = sample_rate_divider_for(rate_hz)
+    assert reg.BASE_SAMPLE_RATE_HZ / (1 + divider) == pytest.approx(expected_hz, abs=0.01)
+    with pytest.raises(ValueError, match="IMU rate"):
+        sample_rate_divider_for(0.0)
+
+
+def test_records_written_after_a_pop_behind_a_cut_record_are_never_decoded() -> None:
+    # The race of a full snapshot FIFO: the host counts 22 whole records, the chip writes
+    # the cut 23rd during the transfer, the host pops the 22 and the cut bytes lead the
+    # FIFO; records written next follow them. The next read must drop, not misread, them.
+    emulator, clock, imu = started()
+    chip = emulator.chips[0x69]
+    clock.sleep(reg.FIFO_RECORDS * imu.sample_period_s + 1e-4)
+    whole = imu.read_fifo()
+    assert not whole.overflowed and len(whole.samples) == reg.FIFO_RECORDS
+    chip.fifo[:0] = bytes(6)  # the cut record's tail now leads
+    chip.banks[0][reg.INT_STATUS_2] |= 0x01
+    clock.sleep(0.05)
+    assert imu.read_fifo() == FifoRead((), overflowed=True)
+    clock.sleep(0.05)
+    again = imu.read_fifo()
+    assert not again.overflowed and 4 <= len(again.samples) <= 6
