@@ -34,8 +34,9 @@ T = TypeVar("T")
 
 class AsyncIcm20948:
     """Wraps one `Icm20948`. bus_lock: shared by all wrappers on the same bus;
-    timeout_s: bound of a single read; init_timeout_s: bound of `initialize` and of
-    `estimate_gyro_bias` (which wait for the chip)."""
+    timeout_s: bound of a single read; init_timeout_s: bound of `initialize` and
+    `enable_fifo`, and of `estimate_gyro_bias` on top of its samples' duration (which
+    wait for the chip)."""
 
     def __init__(
         self,
@@ -91,4 +92,6 @@ class AsyncIcm20948:
 
     async def estimate_gyro_bias(self, sample_count: int = 200, **kwargs: float | bool) -> GyroBiasEstimate:
         call = functools.partial(self.driver.estimate_gyro_bias, sample_count, **kwargs)  # type: ignore[arg-type]
-        return await self._run("estimate_gyro_bias", call, self.init_timeout_s)
+        # One sample per output period: 100 samples at 10 Hz take 10 s on the rig.
+        timeout_s = self.init_timeout_s + sample_count * self.driver.sample_period_s
+        return await self._run("estimate_gyro_bias", call, timeout_s)
