@@ -166,6 +166,7 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
     # little per evaluation, so they seed the next solves far better than the previous
     # pose (other jet forces) does.
     last: list[Solution | None] = [None] * len(poses)
+    unsolved_steps = [0]
 
     def parameters_at(x: np.ndarray) -> list[ModelParameters]:
         fitted_params = with_parameters(initial, dict(zip(names, x)))
@@ -185,7 +186,6 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
     def evaluate(x: np.ndarray) -> tuple[np.ndarray, list[Solution], list[ModelParameters]]:
         key = x.tobytes()
         if key not in cache:
-            cache.clear()  # only the latest point is asked for again (by the Jacobian)
             params = parameters_at(x)
             solutions: list[Solution] = []
             previous: Solution | None = None
@@ -198,11 +198,20 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
                 solutions.append(previous)
             last[:] = solutions
             residuals = residual_rows([solutions[index] for index in fitted_indices]).ravel()
+            cache.clear()  # only the latest point is asked for again (by the Jacobian)
             cache[key] = (residuals, solutions, params)
         return cache[key]
 
     def residual(x: np.ndarray) -> np.ndarray:
-        return evaluate(x)[0]
+        try:
+            return evaluate(x)[0]
+        except ConvergenceError:
+            if last[0] is None:  # the start itself: there is no solved point to fall back on
+                raise
+            # A trial step the model cannot solve (a soft rod folding under a heavy load,
+            # say): non-finite residuals make the trust-region solver shorten the step.
+            unsolved_steps[0] += 1
+            return np.full(len(fitted_indices) * rows_per_pose, np.nan)
 
     def jacobian(x: np.ndarray) -> np.ndarray:
         residuals, solutions, params = evaluate(x)
@@ -315,7 +324,9 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         rms_orientation_deg_after=_rms_angle_deg(final, rows_per_pose),
         evaluations=int(fit.nfev),
         scaled_gradient_norm=projected_gradient(fit.x, final, fit.jac),
-        stop_reason=_STOP_REASONS.get(fit.status, fit.message),
+        stop_reason=_STOP_REASONS.get(fit.status, fit.message) + (
+            f"; {unsolved_steps[0]} trial step(s) the model could not solve were shortened"
+            if unsolved_steps[0] else ""),
     )
 
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..effects import Effect, effect_values, load_effect
 from ..errors import ConvergenceError
-from ..geometry import quat_from_matrix, se3
+from ..geometry import quat_from_matrix, se3, so3_log
 from ..params import ModelParameters
 from . import kernels
 from ..effects.problem import RodProblem
@@ -41,6 +41,11 @@ DEFAULT_MAX_ITERATIONS = 40
 # follows the physical branch.
 RAMP_BEND_DEG = 150.0
 RAMP_SCHEDULES = (4, 16)
+# Past a fold of the load path (a soft tip under gravity and a large jet force) the
+# branch that continuation follows ends and the rod snaps to a more bent one, which
+# Newton started on the near side cannot reach: the last resort starts further along
+# the bend of the nearest solved shape by these angles (degrees).
+SNAP_TURNS_DEG = (20.0, 45.0, 90.0)
 
 
 @dataclass(frozen=True)
@@ -305,14 +310,20 @@ class ShootingModel:
             solution = self._solution(prepared, jacobian, work)
             if solution.bend_angle_deg <= RAMP_BEND_DEG:
                 return solution
+        nearest = [] if warm_start is None else [warm_start.tip_rotation_in_base]
         for stages in RAMP_SCHEDULES:
-            ramped = self._ramp(prepared, stages, work)
+            ramped, last_solved = self._ramp(prepared, stages, work)
             if ramped is not None:
                 return ramped
+            if last_solved is not None:
+                nearest.append(last_solved)
+        snapped = self._snap(prepared, nearest, work)
+        if snapped is not None:
+            return snapped
         raise ConvergenceError(
             f"{self.name} model did not converge for jet forces "
             f"{prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].tolist()} N (residual {work.info[2]:.3g} "
-            f"after a direct solve and load ramping in up to {RAMP_SCHEDULES[-1]} stages)")
+            f"after a direct solve, load ramping in up to {RAMP_SCHEDULES[-1]} stages and a search past a fold)")
 
     def tip_wrench_columns(self, prepared: PreparedProblem, nominal: Solution, components: np.ndarray,
                            steps: np.ndarray) -> tuple[np.ndarray, Solution]:
@@ -329,17 +340,38 @@ class ShootingModel:
                                    "at this solution; no sensitivity")
         return columns, nominal.with_jacobian(jacobian)
 
-    def _ramp(self, prepared: PreparedProblem, stages: int, work: "_Workspace") -> Solution | None:
-        """Continuation: scale every load from 1/stages up to 1, each stage seeded by the last."""
+    def _ramp(self, prepared: PreparedProblem, stages: int,
+              work: "_Workspace") -> tuple[Solution | None, np.ndarray | None]:
+        """Continuation: scale every load from 1/stages up to 1, each stage seeded by the
+        last. Returns the solution, or None and the tip orientation of the last solved
+        stage (None if none was)."""
         reference = np.eye(3)
+        last_solved = None
         jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
         have_jacobian = False
         for stage in range(1, stages + 1):
             # The kernel leaves ``reference`` at this stage's tip orientation.
             if not self._run(prepared, reference, jacobian, have_jacobian, stage / stages, work):
-                return None
+                return None, last_solved
+            last_solved = reference.copy()
             have_jacobian = True
-        return self._solution(prepared, jacobian, work)
+        return self._solution(prepared, jacobian, work), None
+
+    def _snap(self, prepared: PreparedProblem, nearest: Sequence[np.ndarray], work: "_Workspace") -> Solution | None:
+        """Full load, started from each of the ``nearest`` solved tip orientations turned
+        further about its own bend axis (`SNAP_TURNS_DEG`): the branch past a fold."""
+        jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
+        for rotation in nearest:
+            bend = so3_log(rotation)
+            angle = float(np.linalg.norm(bend))
+            if angle < 1e-6:
+                continue  # straight: no bend to follow
+            for turn_deg in SNAP_TURNS_DEG:
+                # The bend's rotation vector is the same in the tip frame as in the base's.
+                reference = kernels.turned(rotation, bend * (math.radians(turn_deg) / angle))
+                if self._run(prepared, reference, jacobian, False, 1.0, work):
+                    return self._solution(prepared, jacobian, work)
+        return None
 
     def _run(self, prepared: PreparedProblem, reference: np.ndarray, jacobian: np.ndarray,
              have_jacobian: bool, load_scale: float, work: "_Workspace") -> bool:

@@ -13,11 +13,12 @@ import numpy as np
 import pytest
 
 from hydrojet_bench.analysis.diagnosis import UNEXPLAINED, DiagnosisSettings, diagnose, fitting
-from hydrojet_bench.analysis.diagnosis.engine import _significantly_worse
+from hydrojet_bench.analysis.diagnosis.engine import _significantly_worse, _with_known
 from hydrojet_bench.analysis.diagnosis.separate import separating_plan, separating_poses, write_separating_plan
 from hydrojet_bench.bench.plan_choice import choose_plan
 from hydrojet_bench.config.schema import GravityTable
-from hydrojet_bench.effects import LIBRARY, load_effect
+from hydrojet_bench.effects import LIBRARY, load_effect, qualified_parameter_names
+from hydrojet_bench.effects.base import at_physical_limits
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.models import make_model
 from hydrojet_bench.params import with_parameters
@@ -170,6 +171,25 @@ def test_two_hidden_effects_are_both_named_with_their_shares():
     assert sum(found.share_of_excess for found in diagnosis.found) == pytest.approx(total)
     assert [entry["effect"] for entry in diagnosis.as_dict()["effects"]] == names
     assert len(diagnose(steps, "cosserat", candidates=tried, settings=DiagnosisSettings(depth=1)).found) == 1
+
+
+def test_gravity_named_in_a_later_stage_replaces_the_baselines_nominal_gravity():
+    """Gravity is in every baseline at its nominal weight and its weight_scale is a candidate.
+    Named after another effect, it once joined the baseline a second time, and the next
+    stage's first candidate raised "effects listed twice" (PRB anisotropy x2 on the
+    horizontal rod, in the library study)."""
+    anisotropy = load_effect("anisotropic_stiffness")
+    problem = fitting.Problem(steps=None, split=None, gravity_in_base_m_s2=np.zeros((1, 3)), model_name="prb",
+                              baseline_effects=candidates("gravity") + (anisotropy,),
+                              known_names=qualified_parameter_names(anisotropy), initial=PROFILE.model_parameters(),
+                              orientation_sigma_rad=1e-3, position_weight_rad_per_m=0.0)
+    widened = at_physical_limits(load_effect("gravity"))
+    joined = _with_known(problem, (widened,))
+    assert [effect.name for effect in joined.baseline_effects] == ["gravity", "anisotropic_stiffness"]
+    assert joined.baseline_effects[0] is widened
+    assert joined.known_names == qualified_parameter_names(anisotropy) + ("gravity.weight_scale",)
+    assert [effect.name for effect in joined.model(load_effect("base_compliance")).effects] == [
+        "gravity", "anisotropic_stiffness", "base_compliance"]
 
 
 def test_the_held_out_test_calls_equal_errors_a_tie_and_clearly_larger_ones_not():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hydrojet_bench.errors import ConvergenceError
 from hydrojet_bench.estimation.calibration import CalibrationPose, calibrate
 from hydrojet_bench.geometry import so3_exp
 from hydrojet_bench.models import CosseratModel, PrbModel
@@ -155,3 +156,33 @@ def test_a_sensor_mounting_and_positions_at_the_sensor_are_recovered():
     expected = {"E0": 2.7e5, "EL": 1.7e5, "L": 0.071, "wd_mz": 2e-4, "wd_mx": 1e-4, "wd_fy": 3e-3, **mounting}
     for name, value in expected.items():
         assert result.values[result.names.index(name)] == pytest.approx(value, rel=1e-4, abs=1e-7), name
+
+
+class FoldingCosserat(CosseratModel):
+    """A Cosserat rod that cannot be solved for base stiffnesses in a band, as a soft rod
+    folding under a heavy load cannot (the library study met one with gravity x2.5)."""
+
+    def __init__(self, unsolvable_e0_pa: tuple[float, float]) -> None:
+        super().__init__()
+        self.unsolvable_e0_pa = unsolvable_e0_pa
+
+    def solve(self, jet_forces_n, params, previous=None, warm_start=None):
+        low, high = self.unsolvable_e0_pa
+        if low < params.rod.youngs_modulus_base_pa < high:
+            raise ConvergenceError(f"{self.name} model did not converge (test band)")
+        return super().solve(jet_forces_n, params, previous=previous, warm_start=warm_start)
+
+
+def test_a_trial_step_the_model_cannot_solve_is_shortened_not_fatal():
+    # The first trial step from E0 = 3e5 lands at 2.901e5 on these poses; the band holds it.
+    result = calibrate(FoldingCosserat((2.900e5, 2.902e5)), poses(), INITIAL)
+    assert result.values[result.names.index("E0")] == pytest.approx(2.7e5, rel=1e-4)
+    assert result.rms_orientation_deg_after < 1e-4
+    assert "1 trial step(s) the model could not solve were shortened" in result.stop_reason
+    # Without the band the same fit says nothing of the kind.
+    assert "could not solve" not in calibrate(CosseratModel(), poses(), INITIAL).stop_reason
+
+
+def test_a_start_the_model_cannot_solve_stops_the_calibration():
+    with pytest.raises(ConvergenceError, match="calibration stopped: a model solve failed"):
+        calibrate(FoldingCosserat((2.5e5, 3.5e5)), poses(), INITIAL)

@@ -12,9 +12,9 @@ import pytest
 from hydrojet_bench.effects import EffectParameter
 from hydrojet_bench.errors import ConvergenceError
 from hydrojet_bench.geometry import adjoint, se3
-from hydrojet_bench.models import CosseratModel, PrbModel, make_model
+from hydrojet_bench.models import CosseratModel, PrbModel, make_model, shooting
 from hydrojet_bench.effects.problem import RodProblem
-from hydrojet_bench.params import ModelParameters, with_parameters
+from hydrojet_bench.params import DisturbanceWrench, ModelParameters, RodParameters, with_parameters
 
 ACROSS = ModelParameters(gravity_in_base_m_s2=(-9.81, 0.0, 0.0))
 MODELS = [CosseratModel(), PrbModel()]
@@ -61,6 +61,34 @@ def test_the_shape_is_orthonormal_and_starts_at_the_clamp(model):
     # rod (chord of a smooth curve) and one link apart for the chain.
     steps = np.linalg.norm(np.diff(solution.positions_in_base_m, axis=0), axis=1)
     assert steps.sum() == pytest.approx(ACROSS.rod.length_m, rel=1e-3)
+
+
+# A soft-tipped chain across gravity with a large jet force, from a diagnosis of the
+# library study: the load path folds, and the chain snaps from about 58 to 98 degrees.
+FOLD = ModelParameters(
+    rod=RodParameters(length_m=0.0695742, radius_m=0.0045, density_kg_m3=1070.0, poisson_ratio=0.49,
+                      youngs_modulus_base_pa=556604.0, youngs_modulus_tip_pa=15841.9),
+    disturbance=DisturbanceWrench(force_n=(0.0318636, 0.00192526, 0.0635907),
+                                  moment_nm=(2.2427e-05, -4.4956e-04, 4.7793e-06)),
+    gravity_in_base_m_s2=(9.809997, -0.0046286, -0.0059968))
+FOLD_JETS_N = [0.0, 0.0336843, 0.0803568]
+
+
+def test_past_a_fold_of_the_load_path_the_solver_finds_the_branch_the_rod_snaps_to(monkeypatch):
+    model = PrbModel()
+    solution = model.solve(FOLD_JETS_N, FOLD)
+    assert solution.residual <= model.tolerance
+    assert 90.0 < solution.bend_angle_deg < 110.0
+    # Warm-started from the shape it snapped from (the same load, just short of the fold),
+    # it lands on the same branch.
+    near = model.solve([0.0, 0.0336843, 0.07], FOLD)
+    assert near.bend_angle_deg < 70.0
+    snapped = model.solve(FOLD_JETS_N, FOLD, warm_start=near)
+    np.testing.assert_allclose(snapped.tip_position_in_base_m, solution.tip_position_in_base_m, atol=1e-9)
+    # Continuation alone ends at the fold.
+    monkeypatch.setattr(shooting, "SNAP_TURNS_DEG", ())
+    with pytest.raises(ConvergenceError, match="past a fold"):
+        PrbModel().solve(FOLD_JETS_N, FOLD)
 
 
 class Softening:

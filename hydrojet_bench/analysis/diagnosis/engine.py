@@ -387,9 +387,13 @@ def _with_discretization_errors(problem: Problem, stage: Diagnosis, tried: Seque
 
 
 def _with_known(problem: Problem, effects: Sequence[Effect]) -> Problem:
-    """``problem`` with ``effects`` (calibrated from now on) in its baseline."""
-    names = tuple(name for effect in effects for name in qualified_parameter_names(effect))
-    return replace(problem, baseline_effects=problem.baseline_effects + tuple(effects),
+    """``problem`` with ``effects`` (calibrated from now on) in its baseline. An effect
+    already there (gravity, always in at its nominal weight) is replaced, not listed twice."""
+    by_name = {effect.name: effect for effect in effects}
+    baseline = tuple(by_name.pop(effect.name, effect) for effect in problem.baseline_effects)
+    names = tuple(name for effect in effects for name in qualified_parameter_names(effect)
+                  if name not in problem.known_names)
+    return replace(problem, baseline_effects=baseline + tuple(by_name.values()),
                    known_names=problem.known_names + names)
 
 
