@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import json
 import time
 from collections import deque
@@ -205,6 +206,7 @@ class Session:
         self._check_accel: list[tuple[float, np.ndarray]] | None = None
         self.checks: tuple[CheckResult, ...] = ()
         self._predicted_bending: np.ndarray | None = None
+        self._heap_frozen = False  # gc.freeze() while the valves are armed
 
     # --- public ---------------------------------------------------------------------
 
@@ -258,6 +260,14 @@ class Session:
     # --- devices --------------------------------------------------------------------
 
     async def _run_devices(self) -> int:
+        try:
+            return await self._run_rig()
+        finally:
+            if self._heap_frozen:
+                gc.unfreeze()
+                self._heap_frozen = False
+
+    async def _run_rig(self) -> int:
         request = self.request
         async with open_rig(request.profile, request.settings, self.clock, seed=request.seed,
                             before_arming=self._load_kernels, on_event=self.event) as rig, \
@@ -302,6 +312,14 @@ class Session:
             # here, as no solve may hold up the valve heartbeat once armed.
             self._predicted_bending = await asyncio.to_thread(
                 predicted_bending_rad, self.request.model, self.params, CheckSettings().force_n)
+        # A full collection walks every live object while holding the interpreter. In a
+        # long-lived process (a notebook; the test suite, ~5e5 objects) that held the loop
+        # 0.15-0.3 s on a fast machine: the likeliest cause of the one valve-watchdog trip
+        # seen mid-session (0.5 s, on a slower machine). What is alive now lives through
+        # the session, so the collector skips it while the valves are armed.
+        gc.collect()
+        gc.freeze()
+        self._heap_frozen = True
 
     def _call_every_kernel(self) -> None:
         rest = self.request.model.solve(np.zeros(3), self.params)
