@@ -90,6 +90,9 @@ class AsyncIcm20948:
     async def read_fifo(self) -> FifoRead:
         return await self._read("read_fifo", self.driver.read_fifo)
 
+    async def reset_fifo(self) -> None:
+        await self._read("reset_fifo", self.driver.reset_fifo)
+
     async def estimate_gyro_bias(self, sample_count: int = 200, **kwargs: float | bool) -> GyroBiasEstimate:
         call = functools.partial(self.driver.estimate_gyro_bias, sample_count, **kwargs)  # type: ignore[arg-type]
         # One sample per output period: 100 samples at 10 Hz take 10 s on the rig.

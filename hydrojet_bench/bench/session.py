@@ -276,10 +276,16 @@ class Session:
             async with asyncio.TaskGroup() as group:
                 streams = [group.create_task(self._em_stream(rig.tracker), name="em-stream"),
                            group.create_task(self._estimate_steps(), name="estimation")]
+                imu_stream = None
                 if rig.imus is not None:
-                    streams.append(group.create_task(self._imu_stream(rig.imus), name="imu-stream"))
+                    imu_stream = group.create_task(self._imu_stream(rig.imus), name="imu-stream")
+                    streams.append(imu_stream)
                 try:
                     completed = await self._play(rig.valves)
+                    if imu_stream is not None:
+                        # Its last drain (within one drain period) before the rates are taken.
+                        self._stopping = True
+                        await imu_stream
                     self._log_overall_rates()
                     return completed
                 finally:
@@ -399,11 +405,15 @@ class Session:
             self._write_sample("em", t_s, base.orientation, tip.orientation, base_p, tip_p)
 
     async def _imu_stream(self, imus: ImuPair) -> None:
+        """Drain both FIFOs every `FIFO_DRAIN_SAMPLES` samples until the session stops, then
+        once more: the rate meter counts exactly the samples taken while it ran."""
         base_chip, tip_chip = imus.base, imus.tip
         failures = 0
         period_s = base_chip.driver.sample_period_s
         queued: dict[str, deque[ImuSample]] = {"base": deque(), "tip": deque()}
-        async for _ in self._periodic(self._rates["imu"], FIFO_DRAIN_SAMPLES * period_s):
+
+        async def drain() -> None:
+            nonlocal failures
             try:
                 base_read = await base_chip.read_fifo()
                 await asyncio.sleep(0)
@@ -415,7 +425,7 @@ class Session:
                 self.event("warning", "imu", f"samples lost: {error}")
                 if failures >= MAX_CONSECUTIVE_FAILURES:
                     raise SessionAborted(f"IMUs lost: {failures} reads failed in a row ({error})") from error
-                continue
+                return
             for name, read in reads.items():
                 queued[name].extend(read.samples)
                 if read.overflowed:
@@ -425,6 +435,14 @@ class Session:
                 # A turn for the others between pairs: the tracker answers one request per
                 # frame, and a whole batch at once would make it miss frames.
                 await asyncio.sleep(0)
+
+        # What queued while the kernels loaded, before arming, is not the session's: the
+        # FIFOs may even have overflowed then.
+        await base_chip.reset_fifo()
+        await tip_chip.reset_fifo()
+        async for _ in self._periodic(self._rates["imu"], FIFO_DRAIN_SAMPLES * period_s):
+            await drain()
+        await drain()
 
     def _imu_overflowed(self, sensor: str, period_s: float) -> None:
         self.status.imu_overflows += 1
