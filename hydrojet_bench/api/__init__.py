@@ -207,12 +207,16 @@ def study(spec: str | Path | None = None, output: str | Path | None = None, *, w
     if progress is not None:
         where = scheduler or f"a local cluster of {workers} worker{'s' if workers != 1 else ''}"
         progress(f"study {plan.name}: {len(cells)} cells on {where}, rows in {store.rows_folder}")
+    ids = {cell.id for cell in cells}
     outcome = run_tasks(lambda: dask_client(scheduler, workers), run_cell, cells, [cell.id for cell in cells],
                         store, error_row=cell_row, label="cells")
-    written_csv = store.write_csv() if csv else None
-    rows = store.table()
+    # Rows of cells this spec no longer has (it was edited, or an effect file moved) stay
+    # stored but are no part of this study's tables and report.
+    left_out = len(store.finished() - ids)
+    written_csv = store.write_csv(ids) if csv else None
+    rows = store.table(ids)
     return StudyResult(plan.name, store.folder, rows, outcome, tuple(write_report(rows, store.folder / "report")),
-                       written_csv)
+                       written_csv, left_out)
 
 
 # --- inputs --------------------------------------------------------------------------

@@ -207,7 +207,8 @@ class DiagnoseResult:
 class StudyResult:
     """A study's rows (one per cell: truth, verdict, sizes, timings; see
     `studies.cell.ROW_COLUMNS`), where they are stored, the run's outcome (None when
-    only the report was rebuilt) and the report files written."""
+    only the report was rebuilt) and the report files written. left_out: rows stored in
+    the folder for cells the spec does not have (not in ``rows`` or the report)."""
 
     name: str
     folder: Path
@@ -215,6 +216,7 @@ class StudyResult:
     outcome: Outcome | None
     report: tuple[Path, ...] = field(default=())
     csv: Path | None = None
+    left_out: int = 0
 
     def to_pandas(self) -> pd.DataFrame:
         return self.rows.copy()

@@ -44,6 +44,10 @@ def run(args: argparse.Namespace) -> int:
     if outcome is not None:
         console.print(f"{outcome.submitted} cells run ({outcome.skipped} already done), {outcome.failed} failed, "
                       f"{outcome.wall_s:.1f} s ({outcome.cells_per_minute:.2f} cells/min)")
+    if result.left_out:
+        progress.print(f"[yellow]warning:[/] {result.left_out} row(s) under {render.plain(result.folder / 'rows')} "
+                       "belong to no cell of this spec (an edited spec or a moved effect file): left out of the "
+                       "tables and report")
     for path in ([result.csv] if result.csv else []) + list(result.report):
         console.print(f"wrote {render.plain(path)}")
     if args.json:
@@ -51,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
             "study": result.name, "folder": str(result.folder),
             "outcome": None if outcome is None else {"run": outcome.submitted, "skipped": outcome.skipped,
                                                      "failed": outcome.failed, "wall_s": outcome.wall_s},
+            "rows_left_out": result.left_out,
             "files": [str(path) for path in ([result.csv] if result.csv else []) + list(result.report)],
             "rows": [render.json_row(row) for row in result.rows.to_dict("records")]})
     return 0

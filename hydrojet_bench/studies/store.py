@@ -6,7 +6,7 @@ a half-written row and a rerun knows exactly which ids are done.
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from pathlib import Path
 
 import pandas as pd
@@ -42,15 +42,16 @@ class RowStore:
         os.replace(temporary, path)
         return path
 
-    def table(self) -> pd.DataFrame:
-        """Every stored row, one pandas table (empty with the columns when none is)."""
-        parts = sorted(self.rows_folder.glob("*.parquet"))
+    def table(self, ids: Collection[str] | None = None) -> pd.DataFrame:
+        """The stored rows (only those of ``ids`` when given), one pandas table (empty with
+        the columns when none is)."""
+        parts = sorted(path for path in self.rows_folder.glob("*.parquet") if ids is None or path.stem in ids)
         if not parts:
             return self.schema.empty_table().to_pandas()
         return pa.concat_tables(pq.read_table(part, schema=self.schema) for part in parts).to_pandas()
 
-    def write_csv(self) -> Path:
-        """The table as ``DIR/rows.csv`` beside the Parquet parts."""
+    def write_csv(self, ids: Collection[str] | None = None) -> Path:
+        """The table (of ``ids`` when given) as ``DIR/rows.csv`` beside the Parquet parts."""
         path = self.folder / "rows.csv"
-        self.table().to_csv(path, index=False)
+        self.table(ids).to_csv(path, index=False)
         return path

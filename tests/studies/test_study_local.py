@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from study_helpers import run_study, stored_rows
+from study_helpers import TINY, run_study, stored_rows, write_spec
 
 
 def test_local_cluster_records_every_cell_and_the_failing_one(spec_with_boom: Path, tmp_path: Path):
@@ -40,3 +40,14 @@ def test_local_cluster_records_every_cell_and_the_failing_one(spec_with_boom: Pa
     document = json.loads(rebuilt.stdout)  # the JSON alone on standard output
     assert document["outcome"] is None and len(document["rows"]) == 6
     assert str(report / "summary.md") in document["files"] and f"wrote {report / 'summary.md'}" in rebuilt.stderr
+
+    # The spec without its failing effect: its 4 cells are done, and the 2 rows of cells it
+    # no longer has are said to be left out, not reported as its own.
+    without_boom = write_spec(tmp_path, TINY, name="without_boom.toml")
+    rerun = run_study(str(without_boom), "-o", str(out), "--json", "-")
+    assert rerun.returncode == 0, rerun.stderr
+    document = json.loads(rerun.stdout)
+    assert document["outcome"]["skipped"] == 4 and document["rows_left_out"] == 2
+    assert {row["truth"] for row in document["rows"]} == {"none", "jet_gain"} and len(document["rows"]) == 4
+    assert "warning: 2 row(s) under" in " ".join(rerun.stderr.split())
+    assert "boom" not in (report / "summary.md").read_text()
