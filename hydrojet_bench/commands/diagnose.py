@@ -22,7 +22,7 @@ from rich.console import Console
 from rich.panel import Panel
 
 from ..analysis.diagnosis import NONE, UNEXPLAINED, Diagnosis, DiagnosisSettings, diagnose
-from ..analysis.diagnosis.engine import DEFAULT_DEPTH, default_candidates
+from ..analysis.diagnosis.engine import DEFAULT_DEPTH, FoundEffect, default_candidates
 from ..analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
 from ..analysis.diagnosis.fitting import scored_as_diagnosed
 from ..analysis.diagnosis.noise import repeatability_floor
@@ -221,11 +221,28 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
         if stage.alternatives:
             lines.append(f"{stage.verdict} explains the held-out data no better than {', '.join(stage.alternatives)} "
                          f"within noise (paired test at the {DiagnosisSettings().significance:.0%} level): see the separating plan.")
-    final = diagnosis.final
-    if final.remaining_excess and diagnosis.found:
-        lines.append("Even with it the held-out error stays above the noise floor: something else is missing too.")
+    if diagnosis.final.remaining_excess and diagnosis.found:
+        lines.append(_remaining_excess(diagnosis.found[-1]))
     # On a pipe the console is as wide as a table may need: the box fits its text there.
     console.print(Panel("\n".join(lines), title=title, border_style=style, expand=console.is_terminal))
+
+
+# A PRB fit on twice the links that leaves at most this share of the held-out error is
+# said to show the chain's own error (the error falls with the links only where it is).
+CHAIN_SHARE = 0.75
+
+
+def _remaining_excess(last: FoundEffect) -> str:
+    """What the held-out error left above the floor may be: another missing effect, or
+    (for a PRB fit that twice the links brings clearly lower) the chain's own error."""
+    said = "Even with it the held-out error stays above the noise floor"
+    if last.refined_chain is not None:
+        links, refined_deg = last.refined_chain
+        if refined_deg <= CHAIN_SHARE * last.heldout_orientation_rmse_deg:
+            return (f"{said}, and much of that is the PRB chain's own discretization: with {links} links instead "
+                    f"of {links // 2} it is {refined_deg:.3f} deg, not {last.heldout_orientation_rmse_deg:.3f} deg "
+                    "(`--model cosserat` has no chain to refine). Something else may be missing too.")
+    return f"{said}: something else is missing too."
 
 
 def _found_effects(diagnosis: Diagnosis, candidates: Sequence[Effect]) -> list[Effect]:

@@ -75,7 +75,7 @@ from ...geometry import rotation_angle_deg
 from ...params import ModelParameters
 from .evidence import (NOISE_GAP_PER_FLOOR, OnlineEvidence, cosine, hysteresis_gap_deg, online_evidence,
                        rmse_by_jet, rotation_between)
-from .fitting import Fit, Problem, discretization_errors, fit, fit_candidates, refit_candidates, session_gravity
+from .fitting import Fit, Problem, fit, fit_candidates, refined_chain, refit_candidates, session_gravity
 from .noise import NoiseFloor, estimate_noise_floor
 from .separate import SeparatingPose, separating_poses
 from .setup import SetupFix, fit_discrete, hypotheses, with_setup_stage
@@ -136,8 +136,10 @@ class CandidateResult:
     # Every fitted parameter (the baseline's too): what `diagnose --export` writes.
     calibrated: dict[str, tuple[float, float]] = field(default_factory=dict)
     # A PRB winner's discretization error per own parameter, already in its standard
-    # errors (`fitting.discretization_errors`).
+    # errors, and (links, held-out RMSE in deg) of its fit on twice the chain's links
+    # (`fitting.refined_chain`): how much of what it leaves is the chain's own.
     discretization: dict[str, float] = field(default_factory=dict)
+    refined_chain: tuple[int, float] | None = None
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -159,6 +161,8 @@ class CandidateResult:
             "residual_correlation": self.residual_correlation, "online_correlation": self.online_correlation,
             "evaluations": self.evaluations, "error": self.error,
             "discretization_error": self.discretization,
+            "refined_chain": None if self.refined_chain is None else {
+                "links": self.refined_chain[0], "heldout_orientation_rmse_deg": _number(self.refined_chain[1])},
         }
 
 
@@ -174,13 +178,17 @@ class FoundEffect:
     heldout_orientation_rmse_deg: float
     parameters: dict[str, tuple[float, float]]
     notes: tuple[str, ...]
+    refined_chain: tuple[int, float] | None = None  # see `CandidateResult.refined_chain`
 
     def as_dict(self) -> dict:
         return {"effect": self.effect, "share_of_excess": _number(self.share_of_excess),
                 "heldout_orientation_rmse_deg": _number(self.heldout_orientation_rmse_deg),
                 "parameters": {name: {"value": _number(value), "standard_error": _number(error)}
                                for name, (value, error) in self.parameters.items()},
-                "notes": list(self.notes)}
+                "notes": list(self.notes),
+                "refined_chain": None if self.refined_chain is None else {
+                    "links": self.refined_chain[0],
+                    "heldout_orientation_rmse_deg": _number(self.refined_chain[1])}}
 
 
 @dataclass(frozen=True)
@@ -367,23 +375,33 @@ def diagnose(steps: Dataset, model_name: str = "cosserat", known_effects: Sequen
 
 def _with_discretization_errors(problem: Problem, stage: Diagnosis, tried: Sequence[Effect]) -> Diagnosis:
     """``stage`` with its winner's standard errors widened, in quadrature, by the PRB
-    chain's discretization error (`fitting.discretization_errors`; none for Cosserat)."""
+    chain's discretization error, and the held-out error of its fit on twice the links
+    (`fitting.refined_chain`; none for Cosserat)."""
     winner = stage.winner
     if problem.model_name != "prb" or winner is None or not winner.parameters or stage.winner_fit is None:
         return stage
     effect = next(c for c in tried if c.name == winner.effect)
-    errors = discretization_errors(problem, at_physical_limits(effect) if winner.widened else effect,
-                                   stage.winner_fit)
-    if not errors:
+    refined = refined_chain(problem, at_physical_limits(effect) if winner.widened else effect, stage.winner_fit)
+    if refined is None:
         return stage
+    errors = refined.errors
     widened = {name: (value, float(np.hypot(error, errors.get(name, 0.0))))
                for name, (value, error) in winner.parameters.items()}
-    updated = replace(winner, parameters=widened, calibrated={**winner.calibrated, **widened}, discretization=errors)
+    updated = replace(winner, parameters=widened, calibrated={**winner.calibrated, **widened}, discretization=errors,
+                      refined_chain=(refined.links, _heldout_rmse_deg(problem, refined.fit)))
 
     def swap(candidates: tuple[CandidateResult, ...]) -> tuple[CandidateResult, ...]:
         return tuple(updated if candidate is winner else candidate for candidate in candidates)
 
     return replace(stage, ranking=swap(stage.ranking), setup_ranking=swap(stage.setup_ranking))
+
+
+def _heldout_rmse_deg(problem: Problem, result: Fit) -> float:
+    """Held-out orientation RMSE (deg) of a fit's predictions."""
+    held_out = problem.split.held_out
+    errors = rotation_angle_deg(result.predictions.tip_orientation_in_base[held_out],
+                                problem.steps.tip_orientation_in_base()[held_out])
+    return float(np.sqrt(np.mean(errors**2)))
 
 
 def _with_known(problem: Problem, effects: Sequence[Effect]) -> Problem:
@@ -430,7 +448,7 @@ def _found(first: Diagnosis, stages: Sequence[Diagnosis]) -> tuple[FoundEffect, 
             break
         share = (before**2 - winner.heldout_orientation_rmse_deg**2) / excess if excess > 0.0 else 0.0
         found.append(FoundEffect(winner.effect, float(share), winner.heldout_orientation_rmse_deg,
-                                 winner.parameters, winner.notes))
+                                 winner.parameters, winner.notes, winner.refined_chain))
         before = winner.heldout_orientation_rmse_deg
     return tuple(found)
 
@@ -446,13 +464,10 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
     def heldout_errors(result: Fit) -> np.ndarray:
         return rotation_angle_deg(result.predictions.tip_orientation_in_base[held_out], measured)
 
-    def heldout_rmse(result: Fit) -> float:
-        return float(np.sqrt(np.mean(heldout_errors(result) ** 2)))
-
     def score(result: Fit) -> float:
         return result.training_chi2 + result.parameter_count * float(np.log(max(result.training_rows, 2)))
 
-    base_rmse = heldout_rmse(baseline)
+    base_rmse = _heldout_rmse_deg(problem, baseline)
     base_score = score(baseline)
     base_held = baseline.predictions.select(held_out)
     residual = rotation_between(base_held.tip_orientation_in_base, measured)
@@ -472,7 +487,7 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
                                            False, {}, None, 0.0, 0.0, result.evaluations, result.error,
                                            convergence=f"fit failed: {result.error}"))
             continue
-        rmse = heldout_rmse(result)
+        rmse = _heldout_rmse_deg(problem, result)
         held = result.predictions.select(held_out)
         signature = rotation_between(base_held.tip_orientation_in_base, held.tip_orientation_in_base)
         signatures[candidate.name] = np.degrees(signature)

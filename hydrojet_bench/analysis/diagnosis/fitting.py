@@ -50,7 +50,7 @@ limits (`EffectParameter.limits`); a fit still on a bound is flagged (``at_bound
 Standard errors: from the scaled Jacobian at the optimum with the noise variance the
 diagnosis measured (not the fit's own residual variance, which a missing effect would
 inflate). A PRB chain is not the rod: a named effect's errors also carry the chain's
-discretization error (`discretization_errors`, added by the engine).
+discretization error (`refined_chain`, added by the engine).
 """
 
 from __future__ import annotations
@@ -170,7 +170,7 @@ class Problem:
     initial: ModelParameters
     orientation_sigma_rad: float
     position_weight_rad_per_m: float
-    # PRB links when not the model's default (`discretization_errors` doubles them).
+    # PRB links when not the model's default (`refined_chain` doubles them).
     prb_links: int | None = None
 
     def model(self, candidate: Effect | None = None) -> ShootingModel:
@@ -303,24 +303,36 @@ def fit_candidate(problem: Problem, candidate: Effect, baseline: ModelParameters
     return _best_of(problem, candidate, fits, max_evaluations)
 
 
-def discretization_errors(problem: Problem, candidate: Effect, result: Fit) -> dict[str, float]:
-    """For a PRB fit, an error estimate of each of the candidate's parameters from the
-    chain's discretization (name -> error, its unit); empty for the Cosserat rod.
+@dataclass(frozen=True)
+class ChainRefinement:
+    """A PRB fit repeated with twice the links (`refined_chain`): each of the candidate's
+    own parameters' discretization error estimate (name -> error, its unit) and the
+    refined fit."""
+
+    links: int
+    errors: dict[str, float]
+    fit: Fit
+
+
+def refined_chain(problem: Problem, candidate: Effect, result: Fit) -> ChainRefinement | None:
+    """For a PRB fit, the fit repeated with twice the links from ``result``; None for the
+    Cosserat rod or when that fit fails.
 
     A chain of n links is not the rod: its fitted parameters carry a bias that no noise
     estimate contains (1 to 3 % on a rod bent across gravity, against standard errors of
-    0.1 %). The fit is repeated with twice the links from ``result``; the chain converges
-    at second order in general but only at first order for a section bent off its
-    principal axes, so twice the change bounds the bias of the n-link value either way."""
+    0.1 %), and so do its predictions. The chain converges at second order in general but
+    only at first order for a section bent off its principal axes, so twice the change of
+    a parameter bounds the bias of its n-link value either way."""
     if problem.model_name != "prb" or result.params is None:
-        return {}
-    links = make_model("prb", problem.baseline_effects).links
-    finer = fit(replace(problem, prb_links=2 * links), candidate, result.params, CANDIDATE_MAX_EVALUATIONS)
+        return None
+    links = 2 * (problem.prb_links or make_model("prb", problem.baseline_effects).links)
+    finer = fit(replace(problem, prb_links=links), candidate, result.params, CANDIDATE_MAX_EVALUATIONS)
     if finer.error is not None:
-        return {}
+        return None
     own = set(qualified_parameter_names(candidate))
-    return {name: 2.0 * abs(float(fine) - float(value)) for name, value, fine
-            in zip(result.names, result.values, finer.values) if name in own}
+    errors = {name: 2.0 * abs(float(fine) - float(value)) for name, value, fine
+              in zip(result.names, result.values, finer.values) if name in own}
+    return ChainRefinement(links, errors, finer)
 
 
 def refit_from_profile(problem: Problem, candidate: Effect, baseline: ModelParameters, first: Fit,
