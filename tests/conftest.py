@@ -3,11 +3,14 @@
 * `--rig PROFILE` enables tests marked `rig` (real hardware); they are skipped otherwise.
 * `run_async` runs a coroutine on a fresh event loop and fails the test if it leaves any
   task running: a leaked task on the bench is a heartbeat or reader nobody will stop.
+* SIGINT is handled even when the suite was started with it ignored (see
+  `pytest_configure`).
 """
 
 from __future__ import annotations
 
 import asyncio
+import signal
 from collections.abc import Awaitable, Callable
 from typing import Any, TypeVar
 
@@ -24,6 +27,15 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         metavar="PROFILE",
         help="run the opt-in hardware tests against the rig described by PROFILE (TOML)",
     )
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    # A shell starts its background jobs with SIGINT ignored, and their children inherit
+    # that: the tests that stop a bench or an emulator subprocess with Ctrl-C's signal
+    # would wait for a process that never hears it. A handler here is reset to the
+    # default in every child.
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -29,7 +29,12 @@ def start(device: str, *options: str) -> tuple[subprocess.Popen, str]:
 
 def stop(process: subprocess.Popen) -> str:
     process.send_signal(signal.SIGINT)
-    _, stderr = process.communicate(timeout=10)
+    try:
+        _, stderr = process.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        process.kill()  # not left serving a pty after the test
+        process.communicate()
+        raise
     assert process.returncode == 0, stderr
     assert "Traceback" not in stderr
     return stderr
