@@ -157,8 +157,7 @@ def test_an_existing_log_is_never_overwritten_unless_asked(tmp_path: Path) -> No
     assert path.read_bytes() == before
     with pytest.raises(UserError, match="is a directory"):
         LogWriter(tmp_path)
-    with LogWriter(path, overwrite=True):
-        pass
+    LogWriter(path, overwrite=True).close()
     assert read_log(path).messages == []
 
 

@@ -3,6 +3,8 @@ preparation done before the valves are armed, and the valves closed on every exi
 
 from __future__ import annotations
 
+import contextlib
+
 import msgspec
 import pytest
 
@@ -29,7 +31,7 @@ def test_open_rig_arms_the_valves_last_and_closes_them_on_exit(run_async, failur
 
     async def check():
         opened = None
-        try:
+        with contextlib.suppress(Unplugged):
             async with open_rig(profile, settings, ScaledClock(), seed=3, before_arming=before_arming,
                                 on_event=lambda level, source, message: sources.append(source)) as rig:
                 opened = rig
@@ -40,8 +42,6 @@ def test_open_rig_arms_the_valves_last_and_closes_them_on_exit(run_async, failur
                 assert rig.simulated.valve_emulator.duties_permille[0] > 0
                 if failure is not None:
                     raise failure("tracker cable pulled")
-        except Unplugged:
-            pass
         return opened
 
     rig = run_async(check, timeout_s=60.0)

@@ -4,6 +4,7 @@ never hangs; and a host that dies mid-session leaves the valves closed by the wa
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import select
 import signal
@@ -63,10 +64,8 @@ async def _run_ops_under_faults(bench, faulty: FaultyTransport, fault_kwargs: di
 
 async def _until_ok(call, attempts: int = 5):
     for _ in range(attempts - 1):
-        try:
+        with contextlib.suppress(ValveError):
             return await call()
-        except ValveError:
-            pass
     return await call()
 
 
