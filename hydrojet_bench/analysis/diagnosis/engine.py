@@ -161,8 +161,7 @@ class CandidateResult:
             "residual_correlation": self.residual_correlation, "online_correlation": self.online_correlation,
             "evaluations": self.evaluations, "error": self.error,
             "discretization_error": self.discretization,
-            "refined_chain": None if self.refined_chain is None else {
-                "links": self.refined_chain[0], "heldout_orientation_rmse_deg": _number(self.refined_chain[1])},
+            "refined_chain": _chain_document(self.refined_chain),
         }
 
 
@@ -186,9 +185,7 @@ class FoundEffect:
                 "parameters": {name: {"value": _number(value), "standard_error": _number(error)}
                                for name, (value, error) in self.parameters.items()},
                 "notes": list(self.notes),
-                "refined_chain": None if self.refined_chain is None else {
-                    "links": self.refined_chain[0],
-                    "heldout_orientation_rmse_deg": _number(self.refined_chain[1])}}
+                "refined_chain": _chain_document(self.refined_chain)}
 
 
 @dataclass(frozen=True)
@@ -570,6 +567,14 @@ def _separating(problem: Problem, candidates: Sequence[Effect], fits: Sequence[F
             models.append((candidate.name, problem.model(effect), result.params))
     return separating_poses(models, problem.steps.profile.max_jet_force_n,
                             problem.gravity_in_base_m_s2.mean(axis=0), floor_deg)
+
+
+def _chain_document(refined_chain: tuple[int, float] | None) -> dict | None:
+    """`CandidateResult.refined_chain` in the JSON."""
+    if refined_chain is None:
+        return None
+    links, rmse_deg = refined_chain
+    return {"links": links, "heldout_orientation_rmse_deg": _number(rmse_deg)}
 
 
 def _number(value: float) -> float | None:
