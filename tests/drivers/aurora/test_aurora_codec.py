@@ -4,6 +4,7 @@ AuroraProtocolError."""
 
 from __future__ import annotations
 
+import contextlib
 import struct
 
 import pytest
@@ -106,10 +107,8 @@ def test_command_round_trip(name: str, parameters: str, with_crc: bool) -> None:
 @given(st.binary(max_size=64))
 @PROPERTY
 def test_arbitrary_bytes_as_command_raise_only_protocol_error(data: bytes) -> None:
-    try:
+    with contextlib.suppress(AuroraProtocolError):
         parse_command(data)
-    except AuroraProtocolError:
-        pass
 
 
 # --- text replies -----------------------------------------------------------------
@@ -141,10 +140,8 @@ def test_reply_round_trip(reply) -> None:
 @given(st.binary(max_size=64))
 @PROPERTY
 def test_arbitrary_bytes_as_reply_raise_only_protocol_error(data: bytes) -> None:
-    try:
+    with contextlib.suppress(AuroraProtocolError):
         decode_reply(data)
-    except AuroraProtocolError:
-        pass
 
 
 def test_data_reply_rejects_reserved_payloads() -> None:
