@@ -202,16 +202,22 @@ def enable_fifo_script(a: int = 0x68) -> list:
     ]
 
 
-def test_fifo_read_is_status_count_then_one_transfer_of_whole_records() -> None:
-    script = init_script() + enable_fifo_script() + [
-        R(0x68, 0x1B, 0x00),  # no overflow
-        B(0x68, 0x70, 2, bytes([0x00, 3 * 23])),  # FIFO_COUNTH/L: 69 bytes
-        RW(0x68, 0x72, 3 * 23, fifo_records(3)),  # FIFO_R_W, one transfer
-    ]
-    bus = ScriptedBus(script)
+def fifo_driver(after_enable: list):
+    """A driver initialized with its FIFO on, over a bus scripted with ``after_enable``
+    next: (bus, driver, clock)."""
+    bus = ScriptedBus(init_script() + enable_fifo_script() + after_enable)
     driver, clock = make(bus)
     driver.initialize()
     driver.enable_fifo()
+    return bus, driver, clock
+
+
+def test_fifo_read_is_status_count_then_one_transfer_of_whole_records() -> None:
+    bus, driver, clock = fifo_driver([
+        R(0x68, 0x1B, 0x00),  # no overflow
+        B(0x68, 0x70, 2, bytes([0x00, 3 * 23])),  # FIFO_COUNTH/L: 69 bytes
+        RW(0x68, 0x72, 3 * 23, fifo_records(3)),  # FIFO_R_W, one transfer
+    ])
     read = driver.read_fifo()
     bus.assert_done()
     assert not read.overflowed
@@ -224,31 +230,23 @@ def test_fifo_read_is_status_count_then_one_transfer_of_whole_records() -> None:
 
 @pytest.mark.parametrize(("status", "count"), [(0x01, 512), (0x01, 23), (0x00, 23 + 5)])
 def test_fifo_overflow_or_a_cut_record_empties_the_fifo_unread(status: int, count: int) -> None:
-    script = init_script() + enable_fifo_script() + [
+    bus, driver, _ = fifo_driver([
         R(0x68, 0x1B, status),  # FIFO_OVERFLOW_INT
         B(0x68, 0x70, 2, bytes([count >> 8, count & 0xFF])),
         W(0x68, 0x68, 0x1F), W(0x68, 0x68, 0x00), R(0x68, 0x1B, 0x00),  # reset, no FIFO_R_W read
-    ]
-    bus = ScriptedBus(script)
-    driver, _ = make(bus)
-    driver.initialize()
-    driver.enable_fifo()
+    ])
     read = driver.read_fifo()
     bus.assert_done()
     assert read.overflowed and read.samples == ()
 
 
 def test_failed_fifo_transfer_resets_the_fifo_and_names_the_address() -> None:
-    script = init_script() + enable_fifo_script() + [
+    bus, driver, _ = fifo_driver([
         R(0x68, 0x1B, 0x00),
         B(0x68, 0x70, 2, bytes([0x00, 46])),
         F(RW(0x68, 0x72, 46, b""), eio()),
         W(0x68, 0x7F, 0x00), W(0x68, 0x68, 0x1F), W(0x68, 0x68, 0x00), R(0x68, 0x1B, 0x00),
-    ]
-    bus = ScriptedBus(script)
-    driver, _ = make(bus)
-    driver.initialize()
-    driver.enable_fifo()
+    ])
     with pytest.raises(ImuBusError, match=r"0x68: read 46 FIFO bytes"):
         driver.read_fifo()
     bus.assert_done()
