@@ -31,11 +31,11 @@ class AnisotropicStiffness:
     Identifiability (40 paper poses up to 0.15 N, noise-free, ratio 1.3): fitting E0, EL,
     L and w_d alone leaves 6.2 of its 6.8 deg RMS (rod hanging along gravity).
 
-    The PRB model converges to the Cosserat rod only at first order in the link count
-    when an anisotropic section bends off its principal axes (jet 1, ratio 1.5, no
-    gravity: 0.8 mm apart at 40 links, halving per doubling), at second order about a
-    principal axis (jet 2: 0.01 mm): consistent with its joints applying the section
-    law in the distal link's frame rather than the joint's mid-rotation frame."""
+    The PRB joints apply the section law in the joint's mid-rotation frame: in the distal
+    link's frame the chain converged to the Cosserat rod only at first order in the link
+    count when an anisotropic section bends off its principal axes (jet 1, ratio 1.5, no
+    gravity: 2.4 deg apart at 20 links, halving per doubling); now 0.07 deg at 20 links,
+    quartering per doubling, as about a principal axis."""
 
     name: ClassVar[str] = "anisotropic_stiffness"
     explanation: ClassVar[str] = (

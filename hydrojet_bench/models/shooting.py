@@ -430,10 +430,14 @@ class PrbModel(ShootingModel):
     l_s; with it the chain converges to a rod twice as stiff as the Cosserat model as the
     links multiply, which the paper's near-equal calibrated moduli for the two models
     rule out, so we read it as a typesetting slip.) The spring acts on the joint's
-    rotation vector, with the joint's axes fixed in the distal link, theta_j = K_j^-1
-    R_j^T m_j: the joint torque of eqs. 14-15, J^T w, is exactly that moment about the
-    joint's axes, so the chain satisfies eq. 16's K theta = tau_f + tau_a (tested against
-    explicit Jacobians). Equilibrium is found by the same Newton iteration as the
+    rotation vector theta_j, with the joint's axes in its mid-rotation frame, halfway
+    between the two links (R_j = R_{j-1} exp(theta_j / 2)): theta_j = K_j^-1 R_j^T m_j.
+    The joint torque of eqs. 14-15, J^T w, is exactly that moment about the joint's axes,
+    so the chain satisfies eq. 16's K theta = tau_f + tau_a (tested against explicit
+    Jacobians). The paper only says the axes are attached to the joint; the middle is
+    the choice that makes the chain converge to the rod at second order in the link
+    count for any section (axes fixed in the distal link give first order once the
+    section is anisotropic). Equilibrium is found by the same Newton iteration as the
     Cosserat model, shooting from the tip: three unknowns (the tip orientation) instead
     of 3n joint angles.
     """

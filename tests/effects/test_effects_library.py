@@ -303,18 +303,8 @@ def test_both_models_agree_on_what_the_effect_changes(name):
     cosserat = effect_change(MODELS["cosserat"](("gravity", name)), name)
     prb = effect_change(MODELS["prb"](("gravity", name)), name)
     assert np.linalg.norm(cosserat[1]) > math.radians(2.0), "the test values make a visible change"
-    if name == "anisotropic_stiffness":
-        # The PRB chain converges to the rod only at first order for a section bent off
-        # its principal axes (see the effect's docstring): 12 % apart at 40 links for
-        # these values, and the gap halves when the links double.
-        fine = effect_change(PrbModel(effects=("gravity", name), links=80), name)
-        for part in (0, 1):
-            gap, finer_gap = (np.linalg.norm(p[part] - cosserat[part]) for p in (prb, fine))
-            assert gap < 0.2 * np.linalg.norm(cosserat[part])
-            assert 0.4 < finer_gap / gap < 0.6
-        return
     # PRB-40 sits within ~1e-3 of the Cosserat rod relative to the load's effect (second
-    # order; measured <= 9.5e-4 of the change over these effects); 3e-3 still catches a
+    # order; measured <= 1.3e-3 of the change over these effects, anisotropy the largest); 3e-3 still catches a
     # hook one model ignores or misreads, which is an O(1) difference.
     for part in (0, 1):
         assert np.linalg.norm(prb[part] - cosserat[part]) <= 3e-3 * np.linalg.norm(cosserat[part]) + 1e-12

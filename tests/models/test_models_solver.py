@@ -11,7 +11,7 @@ import pytest
 
 from hydrojet_bench.effects import EffectParameter
 from hydrojet_bench.errors import ConvergenceError
-from hydrojet_bench.geometry import adjoint, se3
+from hydrojet_bench.geometry import adjoint, se3, so3_exp, so3_log
 from hydrojet_bench.models import CosseratModel, PrbModel, make_model, shooting
 from hydrojet_bench.effects.problem import RodProblem
 from hydrojet_bench.params import DisturbanceWrench, ModelParameters, RodParameters, with_parameters
@@ -139,13 +139,16 @@ def test_bad_jet_forces_and_model_names_are_reported():
         make_model("beam")
 
 
-def test_prb_equilibrium_satisfies_eq_16_with_explicit_jacobians():
+@pytest.mark.parametrize("stiffness_ratio", [1.0, 2.0])
+def test_prb_equilibrium_satisfies_eq_16_with_explicit_jacobians(stiffness_ratio):
     """K theta = tau_f + tau_a (eqs. 14-16) with the joint torques computed the paper's
     way: one twist per joint axis, transformed by adjoints, dotted with spatial wrenches.
-    Independent of the kernel's moment recursion."""
-    params = ModelParameters(gravity_in_base_m_s2=(-9.81, 2.0, 0.0))
+    Independent of the kernel's moment recursion. The anisotropic section (EI_x / EI_y =
+    2) is where the frame of the joint's axes matters."""
+    params = ModelParameters(gravity_in_base_m_s2=(-9.81, 2.0, 0.0),
+                             effect_values={"anisotropic_stiffness.stiffness_ratio": stiffness_ratio})
     links = 8
-    model = PrbModel(links=links)
+    model = PrbModel(("gravity", "anisotropic_stiffness"), links=links)
     solution = model.solve([0.03, 0.0, 0.04], params)
     joints = links - 1
     segment = params.rod.length_m / joints
@@ -167,20 +170,17 @@ def test_prb_equilibrium_satisfies_eq_16_with_explicit_jacobians():
     wrenches.append(np.concatenate([capsule_weight, np.cross(com, capsule_weight)]))
     # Which loads lie beyond joint j: link j onwards (links 0..joints), the tip loads always.
     for joint in range(1, joints + 1):
-        distal_rotation = rotations[joint]
-        joint_pose = se3(distal_rotation, positions[joint])
+        # theta_j from the relative rotation of the links either side.
+        theta = so3_log(rotations[joint - 1].T @ rotations[joint])
+        # The joint's axes are its mid-rotation frame, halfway between the two links.
+        joint_pose = se3(rotations[joint - 1] @ so3_exp(0.5 * theta), positions[joint])
         # Body-frame unit twists of the joint axes, mapped to spatial twists (eq. 12).
         spatial_twists = [adjoint(joint_pose) @ np.concatenate([np.zeros(3), axis]) for axis in np.eye(3)]
         beyond = wrenches[joint:]
         torque = np.array([sum(twist @ wrench for wrench in beyond) for twist in spatial_twists])
-        # theta_j from the relative rotation of the links either side.
-        relative = rotations[joint - 1].T @ rotations[joint]
-        angle = np.arccos(np.clip((np.trace(relative) - 1) / 2, -1, 1))
-        axis = np.array([relative[2, 1] - relative[1, 2], relative[0, 2] - relative[2, 0],
-                         relative[1, 0] - relative[0, 1]]) / (2 * np.sin(angle))
-        theta = angle * axis
         s_joint = (joint - 0.5) * segment
         stiffness = params.rod.youngs_modulus_pa(s_joint) * params.rod.second_moment_m4 / segment
         torsion = params.rod.shear_modulus_pa(s_joint) * params.rod.polar_moment_m4 / segment
-        elastic = np.array([stiffness, stiffness, torsion]) * theta
+        root = np.sqrt(stiffness_ratio)
+        elastic = np.array([stiffness * root, stiffness / root, torsion]) * theta
         np.testing.assert_allclose(elastic, torque, rtol=1e-6, atol=1e-12)
