@@ -320,9 +320,9 @@ def refined_chain(problem: Problem, candidate: Effect, result: Fit) -> ChainRefi
 
     A chain of n links is not the rod: its fitted parameters carry a bias that no noise
     estimate contains (1 to 3 % on a rod bent across gravity, against standard errors of
-    0.1 %), and so do its predictions. The chain converges at second order in general but
-    only at first order for a section bent off its principal axes, so twice the change of
-    a parameter bounds the bias of its n-link value either way."""
+    0.1 %), and so do its predictions. The chain converges to the rod at second order in
+    the links, so the n-link bias is about 4/3 of the change from n to 2n links; twice
+    the change bounds it with room for a chain not yet in that regime."""
     if problem.model_name != "prb" or result.params is None:
         return None
     links = 2 * (problem.prb_links or make_model("prb", problem.baseline_effects).links)
