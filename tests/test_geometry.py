@@ -84,3 +84,17 @@ def test_known_values_and_stacks():
     np.testing.assert_allclose(g.so3_log(g.so3_exp(stack)), stack, atol=1e-9)
     # Near a half turn the log stays accurate (the trace formula would not).
     np.testing.assert_allclose(g.so3_log(g.so3_exp([0, math.pi - 1e-9, 0])), [0, math.pi - 1e-9, 0], atol=1e-8)
+
+
+def test_quaternions_of_stacks_match_one_by_one_and_every_largest_component():
+    # Half turns about x, y and z make x, y or z the largest component (Shepperd's three
+    # diagonal cases); the identity and a small turn take the trace case.
+    vectors = np.array([[math.pi, 0, 0], [0, math.pi, 0], [0, 0, math.pi], [0, 0, 0], [0.1, -0.2, 0.3],
+                        [2.0, 1.0, -0.5]])
+    rotations = g.so3_exp(vectors).reshape(2, 3, 3, 3)
+    stacked = g.quat_from_matrix(rotations)
+    assert stacked.shape == (2, 3, 4)
+    for rotation, quaternion in zip(rotations.reshape(-1, 3, 3), stacked.reshape(-1, 4)):
+        np.testing.assert_allclose(quaternion, g.quat_from_matrix(rotation), atol=0)
+        np.testing.assert_allclose(g.matrix_from_quat(quaternion), rotation, atol=1e-12)
+        assert quaternion[0] >= 0.0 and np.linalg.norm(quaternion) == pytest.approx(1.0)
