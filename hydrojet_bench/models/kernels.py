@@ -69,6 +69,9 @@ BASE_SIZE = 7
 
 UNKNOWNS = 3
 
+# Newton steps a PRB joint gets to find its mid-rotation frame (`_joint_curvature`);
+# they converge quadratically from a start within about |theta| / 2 of the answer, and
+# a joint that still has not solved makes the shot NaN, which the solver reports.
 JOINT_NEWTON_STEPS = 8
 
 # Status codes returned by `solve`.
@@ -595,8 +598,8 @@ def _propagate_prb(joints, profile, load_scale, beta, y, work, nodes_p, nodes_r,
     ends (joints + 1 links in all). Each joint lumps one rod segment of length
     1/joints: its stiffness is K(s_j) / segment, so theta_j = segment * u(m), the rod's
     constitutive law at the joint, with the moment in the joint's mid-rotation frame
-    (`_joint_curvature`). The profile has 2 * joints + 1 rows at s = k / (2 joints): joints on odd rows, full-link
-    centres on even rows."""
+    (`_joint_curvature`). The profile has 2 * joints + 1 rows at s = k / (2 joints):
+    joints on odd rows, full-link centres on even rows."""
     segment = 1.0 / joints
     relative = work
     rotation = np.empty((3, 3))

@@ -304,8 +304,9 @@ def test_both_models_agree_on_what_the_effect_changes(name):
     prb = effect_change(MODELS["prb"](("gravity", name)), name)
     assert np.linalg.norm(cosserat[1]) > math.radians(2.0), "the test values make a visible change"
     # PRB-40 sits within ~1e-3 of the Cosserat rod relative to the load's effect (second
-    # order; measured <= 1.3e-3 of the change over these effects, anisotropy the largest); 3e-3 still catches a
-    # hook one model ignores or misreads, which is an O(1) difference.
+    # order; measured <= 1.3e-3 of the change over these effects, anisotropy the
+    # largest); 3e-3 still catches a hook one model ignores or misreads, which is an O(1)
+    # difference.
     for part in (0, 1):
         assert np.linalg.norm(prb[part] - cosserat[part]) <= 3e-3 * np.linalg.norm(cosserat[part]) + 1e-12
 
