@@ -298,10 +298,8 @@ def test_arbitrary_bx_bodies_with_valid_crcs_raise_only_protocol_error(tail: byt
 @given(st.text(alphabet="0123456789ABCDEF+-MISNGDABLE\n", max_size=120) | st.text(max_size=60))
 @PROPERTY
 def test_arbitrary_tx_text_raises_only_protocol_error(text: str) -> None:
-    try:
+    with contextlib.suppress(AuroraProtocolError):
         decode_tx_text(text)
-    except AuroraProtocolError:
-        pass
 
 
 def test_reply_option() -> None:
@@ -362,10 +360,8 @@ def test_reader_on_arbitrary_bytes_raises_only_protocol_error(chunks, binary: bo
                 continue
             if raw is None:
                 break
-            try:
+            with contextlib.suppress(AuroraProtocolError):
                 decode_bx(raw) if raw.startswith(b"\xc4\xa5") else decode_reply(raw)
-            except AuroraProtocolError:
-                pass
 
 
 def test_command_splitter() -> None:
