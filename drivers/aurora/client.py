@@ -44,6 +44,7 @@ from drivers.aurora.replies import (
     TextReply,
     decode_reply,
 )
+from drivers.aurora.pacing import FramePacer
 from drivers.aurora.stream import ReplyReader
 from drivers.transport import Transport, TransportError, open_transport
 
@@ -282,21 +283,18 @@ class AuroraTracker:
         numbers = [r.frame_number for r in frame.tools if r.frame_number is not None]
         return TrackedFrame(poses, numbers[0] if numbers else None, frame.system_status, host_time)
 
-    async def frames(self, skip_repeated: bool = True, period_s: float = FRAME_PERIOD_S) -> AsyncIterator[TrackedFrame]:
-        """Poll frames at the device's rate, forever (break out, or use
-        ``contextlib.aclosing``). With ``skip_repeated`` a frame whose number was already
-        yielded is not yielded again."""
-        last: int | None = None
+    async def frames(self, poll_period_s: float = FRAME_PERIOD_S) -> AsyncIterator[TrackedFrame]:
+        """Each new frame once, reading one every ``poll_period_s`` (s; default: every
+        frame), polls locked to the device's frame count (`FramePacer`), forever (break
+        out, or use ``contextlib.aclosing``)."""
         loop = asyncio.get_running_loop()
+        pacer = FramePacer(FRAME_PERIOD_S, poll_period_s)
         while True:
-            started = loop.time()
+            await asyncio.sleep(max(0.0, pacer.next_poll_s(loop.time()) - loop.time()))
+            sent_s = loop.time()
             frame = await self.read_frame()
-            if skip_repeated and frame.frame_number is not None and frame.frame_number == last:
-                await asyncio.sleep(period_s / 4)
-                continue
-            last = frame.frame_number
-            yield frame
-            await asyncio.sleep(max(0.0, started + period_s - loop.time()))
+            if pacer.observe(sent_s, loop.time(), frame.frame_number):
+                yield frame
 
     # --- command exchange -----------------------------------------------------------
 

@@ -35,8 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.aurora.client import AuroraTracker
+from drivers.aurora.client import FRAME_PERIOD_S, AuroraTracker
 from drivers.aurora.errors import AuroraError
+from drivers.aurora.pacing import FramePacer
 from drivers.imu import ImuError, ImuSample, output_rate_hz, paired_samples
 from drivers.imu.registers import FIFO_RECORDS
 from drivers.transport.base import TransportError
@@ -337,11 +338,9 @@ class Session:
 
     # --- streams --------------------------------------------------------------------
 
-    async def _periodic(self, meter: StreamRateMeter, period_s: float | None = None):
-        """Yield once per ``period_s`` of session time (default: one per sample of
-        ``meter``'s rate); a stream that falls behind skips the missed ticks rather than
-        bursting to catch up (``meter`` then shows it)."""
-        period = period_s if period_s is not None else 1.0 / meter.configured_hz
+    async def _periodic(self, meter: StreamRateMeter, period: float):
+        """Yield once per ``period`` s of session time; a stream that falls behind skips
+        the missed ticks rather than bursting to catch up (``meter`` then shows it)."""
         next_tick = self.clock.now()
         meter.start(next_tick)
         while not self._stopping:
@@ -363,7 +362,18 @@ class Session:
         failures = 0
         missing_before = False
         meter = self._rates["em"]
-        async for _ in self._periodic(meter):
+        clock = self.clock
+        # Polls locked to the tracker's own frames: a frame read twice is no new sample,
+        # and the rate meter counts frames, not polls.
+        pacer = FramePacer(FRAME_PERIOD_S, 1.0 / meter.configured_hz)
+        meter.start(clock.now())
+        while not self._stopping:
+            poll_s = pacer.next_poll_s(clock.now())
+            if poll_s > clock.now():
+                await clock.sleep_until(poll_s)
+            else:
+                await asyncio.sleep(0)  # at once, yet a turn for the others
+            sent_s = clock.now()
             try:
                 frame = await tracker.read_frame()
                 failures = 0
@@ -373,7 +383,9 @@ class Session:
                 if failures >= MAX_CONSECUTIVE_FAILURES:
                     raise SessionAborted(f"EM tracker lost: {failures} frames failed in a row ({error})") from error
                 continue
-            t_s = self.clock.now()
+            t_s = clock.now()
+            if not pacer.observe(sent_s, t_s, frame.frame_number):
+                continue
             meter.delivered()
             status.em_frames += 1
             tools = tuple(EmTool(

@@ -4,7 +4,6 @@ emulated devices delivered (the kernel figures are in `commands.perf`)."""
 
 from __future__ import annotations
 
-import asyncio
 import tempfile
 import time
 from pathlib import Path
@@ -23,6 +22,7 @@ def session_protocol_figures(plan=None) -> dict:
     """Play ``plan`` (default: the paper protocol, 229 steps) on the ``sim`` profile's
     simulated rig at its time scale, with the IMU and tracker rates of the physical rig;
     wall time in s and delivered / configured rate per stream over the whole session."""
+    from ..bench.event_loop import run_session
     from ..bench.session import Session, SessionAborted, SessionRequest
     from ..model_choice import build_model
     from ..plans import paper_protocol
@@ -42,7 +42,7 @@ def session_protocol_figures(plan=None) -> dict:
         started = time.perf_counter()
         aborted = None
         try:
-            result = asyncio.run(Session(request).run())
+            result = run_session(Session(request).run())
         except SessionAborted as error:
             # A host too slow for these rates starves the valve heartbeat: a figure, not a crash.
             aborted, result = str(error), None

@@ -129,7 +129,9 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
     if server is not None:
         progress.print(f"Foxglove: open a connection to {server.url} (layout: docs/foxglove/hydrojet.json)",
                        highlight=False, markup=False)
-    result = asyncio.run(_run_session(request, progress, live=not args.no_live and progress.is_terminal,
+    from ..bench.event_loop import run_session
+
+    result = run_session(_run_session(request, progress, live=not args.no_live and progress.is_terminal,
                                       clipped=frozenset(clipped), on_log_message=server and server.publish))
     if result is None:
         progress.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
