@@ -4,7 +4,7 @@ asyncio's default loop on Linux waits in epoll, which counts its timeout in whol
 milliseconds and rounds up: a wait of 0.3 ms lasts 1 ms. On the real rig that is noise.
 On the simulated rig at 25x, one Aurora frame lasts 1 ms of wall time, so a poll aimed at
 the start of a frame would land anywhere in it, or in the next one: measured over the
-paper protocol on the 2-core machine, 69 % of the tracker's frames were read with epoll
+paper protocol on the 2-core machine, 84 % of the tracker's frames were read with epoll
 against 95 % with select(2), which waits to the microsecond. A session watches a handful
 of descriptors (a pty or serial port per device), so select's limits (descriptor numbers
 below 1024, a scan per wait) cost nothing here.

@@ -1,8 +1,11 @@
 """How many samples per second each device stream delivers, against what it is set to.
 
-A stream that falls behind skips ticks (`Session._periodic`), so a slow host or a slow
-link shows only as fewer samples: this is where that becomes a number and a warning,
-on the rig and on the simulated rig alike. Rates are per second of session time.
+A stream that falls behind skips ticks (`Session._periodic`) or frames (the tracker's
+polls follow its frame count, `drivers.aurora.pacing`), so a slow host or a slow link
+shows only as fewer samples: this is where that becomes a number and a warning, on the
+rig and on the simulated rig alike. The tracker's samples are frames read for the first
+time (a frame polled twice counts once); the IMUs' are FIFO records, each its own sample
+instant. Rates are per second of session time.
 """
 
 from __future__ import annotations
