@@ -64,7 +64,7 @@ def test_free_running_polls_at_the_frame_rate_would_miss_and_repeat_frames() -> 
     for tick in range(3000):
         now = max(now, tick * PERIOD_S) + rng.uniform(0.0, 0.6 * PERIOD_S)
         seen.append(math.floor((now - 0.3 * PERIOD_S) / PERIOD_S))
-    assert len(set(seen)) < 0.95 * (seen[-1] - seen[0])
+    assert len(set(seen)) < 0.8 * (seen[-1] - seen[0])  # 75 % of the frames
     rng = random.Random(1)
     frames, _, _ = play(FramePacer(PERIOD_S), 3000, origin_s=0.3 * PERIOD_S,
                         lateness=lambda: rng.uniform(0.0, 0.6 * PERIOD_S))
