@@ -132,7 +132,7 @@ class OnlineDisturbanceEstimator:
         return math.degrees(kernels.relative_rotation_vector(solution.tip_sensor_in_base_sensor(), measured, omega))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _damped_least_squares(matrix, omega, damping, gain):
     """gain S^T (S S^T + mu I)^-1 omega with mu = damping * the largest eigenvalue of S S^T
     (eq. 4 with the damping's sign corrected, see the module docstring); one kernel

@@ -25,6 +25,12 @@ EI_ref / L^2 (EI_ref = E0 * I), so the unknowns and residuals are of order one a
 single tolerance means the same for every rod. `hydrojet_bench.models.shooting` does the
 scaling.
 
+Every kernel releases the interpreter lock (``nogil``): a session calibrates and
+estimates on worker threads beside its event loop, and kernels holding the lock during
+the 40-pose calibration stalled that loop for 0.1 s (the paper protocol at x25), long
+enough for the emulated IMUs' FIFOs to overflow. Kernels write only into arrays their
+caller made for the call, so two threads may run them at once.
+
 State layout (18): p (3), R (9, row-major), n (3), m (3); n and m in the base frame, as
 the internal force and moment exerted by the distal part on the proximal part. The
 unknown x is the rotation vector of R_ref^T R_L (right perturbation of a reference).
@@ -86,7 +92,7 @@ NOT_FINITE = 3
 _PLAY_SMOOTHING = 0.05
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, nogil=True, fastmath=False)
 def _so3_exp(wx, wy, wz, out):
     theta2 = wx * wx + wy * wy + wz * wz
     theta = np.sqrt(theta2)
@@ -107,7 +113,7 @@ def _so3_exp(wx, wy, wz, out):
     out[2, 2] = 1.0 - b * (wx * wx + wy * wy)
 
 
-@njit(cache=True, fastmath=_HOT, inline="always")
+@njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
 def _curvature(profile, row, load_scale, beta, mx, my, mz):
     """Invert the constitutive law at a sample point: body moment -> curvature u."""
     vx = mx * profile[row, COMPLIANCE]
@@ -142,7 +148,7 @@ def _curvature(profile, row, load_scale, beta, mx, my, mz):
             load_scale * profile[row, INTRINSIC_CURVATURE + 2] + mz * profile[row, COMPLIANCE + 2])
 
 
-@njit(cache=True, fastmath=_HOT, inline="always")
+@njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
 def _cosserat_derivative(y, profile, row, load_scale, beta):
     """Right-hand side of eqs. 21 in the base frame, on the state as an 18-tuple, and the
     curvature u it used. Tuples stay in registers; with arrays numba cannot prove the
@@ -176,7 +182,7 @@ def _cosserat_derivative(y, profile, row, load_scale, beta):
     ), (ux, uy, uz)
 
 
-@njit(cache=True, fastmath=_HOT, inline="always")
+@njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
 def _curvature_compliance(profile, row, load_scale, beta, u):
     """du/dm_b at a sample point where the curvature is ``u``: the inverse of the
     constitutive law's Jacobian, (a00, a01, a10, a11) for bending and the torsional
@@ -199,7 +205,7 @@ def _curvature_compliance(profile, row, load_scale, beta, u):
     return j11 / det, -j01 / det, -j10 / det, j00 / det, cz
 
 
-@njit(cache=True, fastmath=_HOT, inline="always")
+@njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
 def _tangent_rates(t, u, c, l, start, a, previous, dn, out):
     """The variational equation of eqs. 21 at an RK4 stage: ``out[:, d]`` = the derivative
     of the tangent start[:, d] + a * previous[:, d] (15 rows: dp, dR row-major, dm; one
@@ -254,7 +260,7 @@ def _tangent_rates(t, u, c, l, start, a, previous, dn, out):
         out[14, d] = -(d02 * ny - d12 * nx + r02 * dny - r12 * dnx) - (d20 * lx + d21 * ly + d22 * lz)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _clamp(m0x, m0y, m0z, base, rotation):
     """Clamp rotation from the base moment: compliance, then (optionally) play. Writes the
     rotation matrix and returns its rotation vector."""
@@ -280,14 +286,14 @@ def _clamp(m0x, m0y, m0z, base, rotation):
     return cx, cy, cz
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _arm(rotation, tip, b, c):
     """(R T)_bc for the 9 row-major entries of R and the tip's dead-force arm T."""
     return (rotation[3 * b] * tip[TIP_DEAD_ARM + c] + rotation[3 * b + 1] * tip[TIP_DEAD_ARM + 3 + c]
             + rotation[3 * b + 2] * tip[TIP_DEAD_ARM + 6 + c])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _tip_wrench(rotation, tip, load_scale, dead, out):
     """Tip wrench (n, m in the base frame) into ``out`` (6) for a tip orientation given as
     the 9 row-major entries ``rotation``; it is linear in them, which is also how the
@@ -318,7 +324,7 @@ def _tip_wrench(rotation, tip, load_scale, dead, out):
     out[5] += load_scale * (_arm(rotation, tip, 0, 1) - _arm(rotation, tip, 1, 0))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _tip_state(x, reference, tip, load_scale, y, work):
     """Tip state for the unknown x: p = 0, R_L = reference exp(x), n and m = tip wrench."""
     _so3_exp(x[0], x[1], x[2], work)
@@ -332,7 +338,7 @@ def _tip_state(x, reference, tip, load_scale, y, work):
     _tip_wrench(y[3:12], tip, load_scale, True, y[12:18])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _store_node(y, index, nodes_p, nodes_r):
     """Store a node's position and frame as integrated (``y``: the state, an array or an
     18-tuple); `_finish_nodes` tidies the last shot's nodes once, after the solve."""
@@ -350,7 +356,7 @@ def _store_node(y, index, nodes_p, nodes_r):
     nodes_r[index, 2, 2] = y[11]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _orthonormalise(rotation):
     """Re-orthonormalise a frame in place (Gram-Schmidt from the tangent): RK4 lets R drift
     off SO(3) by ~1e-6 over a large bend, which users should not see."""
@@ -369,7 +375,7 @@ def _orthonormalise(rotation):
     rotation[0, 2], rotation[1, 2], rotation[2, 2] = zx, zy, zz
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _finish_nodes(clamp_state, base, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation):
     """Turn the last shot's nodes into the shape users see: positions shifted so the clamp
     is at the origin (the shot starts with the tip there) and scaled to metres, frames
@@ -395,17 +401,17 @@ def _finish_nodes(clamp_state, base, length, wrench_scale, nodes_p, nodes_r, bas
         base_wrench[k] = clamp_state[12 + k] * wrench_scale[k]
 
 
-@njit(cache=True, fastmath=_HOT, inline="always")
+@njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
 def _axpy18(y, a, k):
     return (y[0] + a * k[0], y[1] + a * k[1], y[2] + a * k[2], y[3] + a * k[3], y[4] + a * k[4], y[5] + a * k[5], y[6] + a * k[6], y[7] + a * k[7], y[8] + a * k[8], y[9] + a * k[9], y[10] + a * k[10], y[11] + a * k[11], y[12] + a * k[12], y[13] + a * k[13], y[14] + a * k[14], y[15] + a * k[15], y[16] + a * k[16], y[17] + a * k[17])
 
 
-@njit(cache=True, fastmath=_HOT, inline="always")
+@njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
 def _rk4_sum18(y, sixth, k1, k2, k3, k4):
     return (y[0] + sixth * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]), y[1] + sixth * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]), y[2] + sixth * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]), y[3] + sixth * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]), y[4] + sixth * (k1[4] + 2.0 * (k2[4] + k3[4]) + k4[4]), y[5] + sixth * (k1[5] + 2.0 * (k2[5] + k3[5]) + k4[5]), y[6] + sixth * (k1[6] + 2.0 * (k2[6] + k3[6]) + k4[6]), y[7] + sixth * (k1[7] + 2.0 * (k2[7] + k3[7]) + k4[7]), y[8] + sixth * (k1[8] + 2.0 * (k2[8] + k3[8]) + k4[8]), y[9] + sixth * (k1[9] + 2.0 * (k2[9] + k3[9]) + k4[9]), y[10] + sixth * (k1[10] + 2.0 * (k2[10] + k3[10]) + k4[10]), y[11] + sixth * (k1[11] + 2.0 * (k2[11] + k3[11]) + k4[11]), y[12] + sixth * (k1[12] + 2.0 * (k2[12] + k3[12]) + k4[12]), y[13] + sixth * (k1[13] + 2.0 * (k2[13] + k3[13]) + k4[13]), y[14] + sixth * (k1[14] + 2.0 * (k2[14] + k3[14]) + k4[14]), y[15] + sixth * (k1[15] + 2.0 * (k2[15] + k3[15]) + k4[15]), y[16] + sixth * (k1[16] + 2.0 * (k2[16] + k3[16]) + k4[16]), y[17] + sixth * (k1[17] + 2.0 * (k2[17] + k3[17]) + k4[17]))
 
 
-@njit(cache=True, fastmath=_HOT, inline="always")
+@njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
 def _rk4_stages(y, h, profile, row, load_scale, beta):
     """One classic RK4 step of length h (negative: towards the clamp) from sample row
     ``row``; the midpoint and end use rows row -/+ 1 and 2 in the step's direction.
@@ -423,18 +429,18 @@ def _rk4_stages(y, h, profile, row, load_scale, beta):
     return _rk4_sum18(y, h / 6.0, k1, k2, k3, k4), t2, t3, t4, u1, u2, u3, u4
 
 
-@njit(cache=True, fastmath=_HOT, inline="always")
+@njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
 def _rk4_step(y, h, profile, row, load_scale, beta):
     return _rk4_stages(y, h, profile, row, load_scale, beta)[0]
 
 
-@njit(cache=True, fastmath=_HOT, inline="always")
+@njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
 def _moment_load(profile, row, load_scale):
     return (load_scale * profile[row, DISTRIBUTED_MOMENT], load_scale * profile[row, DISTRIBUTED_MOMENT + 1],
             load_scale * profile[row, DISTRIBUTED_MOMENT + 2])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _integrate_cosserat(steps, profile, load_scale, beta, y, nodes_p, nodes_r, store):
     """RK4 from the tip (s = 1) back to the clamp (s = 0); the state array ``y`` is read
     at the tip and overwritten with the clamp state."""
@@ -450,7 +456,7 @@ def _integrate_cosserat(steps, profile, load_scale, beta, y, nodes_p, nodes_r, s
         y[k] = state[k]
 
 
-@njit(cache=True, fastmath=_HOT)
+@njit(cache=True, nogil=True, fastmath=_HOT)
 def _integrate_cosserat_tangent(steps, profile, load_scale, beta, y, tangents, dn, nodes_p, nodes_r, store):
     """`_integrate_cosserat` carrying tangents along: ``tangents`` (15, D: dp, dR, dm per
     direction) is read at the tip and overwritten at the clamp; ``dn`` (3, D) is constant
@@ -489,7 +495,7 @@ def _integrate_cosserat_tangent(steps, profile, load_scale, beta, y, tangents, d
         y[k] = state[k]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _rigid_link(y, length, profile, row_a, row_b, load_scale):
     """Carry the state back along a rigid link (distal end -> proximal end). Its
     distributed load is lumped at the link's midpoint, with the profile averaged over
@@ -517,7 +523,7 @@ def _rigid_link(y, length, profile, row_a, row_b, load_scale):
     y[2] -= dz
 
 
-@njit(cache=True, fastmath=_HOT, inline="always")
+@njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
 def _joint_curvature(profile, row, load_scale, beta, segment, mx, my, mz):
     """The section law at a joint, theta = segment * u(m_mid), applied in the joint's
     mid-rotation frame R_mid = R_distal exp(-theta / 2), where the moment reads
@@ -591,7 +597,7 @@ def _joint_curvature(profile, row, load_scale, beta, segment, mx, my, mz):
     return np.nan, np.nan, np.nan
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _propagate_prb(joints, profile, load_scale, beta, y, work, nodes_p, nodes_r, store):
     """PRB chain from the tip back to the clamp. ``joints`` spherical joints sit at
     s = (j - 1/2) / joints, j = 1..joints, joined by full links with half links at both
@@ -631,7 +637,7 @@ def _propagate_prb(joints, profile, load_scale, beta, y, work, nodes_p, nodes_r,
         _store_node(y, 0, nodes_p, nodes_r)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _clamp_residual(y, base, residual, work):
     """Orientation error of the shape's base against the clamp: the rotation vector of
     R_clamp^T R(0). The exact logarithm matters: with it, and the reference re-anchored
@@ -666,7 +672,7 @@ def _clamp_residual(y, base, residual, work):
     residual[2] = scale * vz
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def shoot(kind, resolution, x, reference, profile, tip, base, beta, load_scale, residual, y,
           work, nodes_p, nodes_r, store):
     """From the tip unknown ``x`` back to the clamp; write the clamp residual. ``y`` holds
@@ -679,7 +685,7 @@ def shoot(kind, resolution, x, reference, profile, tip, base, beta, load_scale, 
     _clamp_residual(y, base, residual, work)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _orientation_seeds(y, tip, load_scale, tangents, dn, wrench):
     """Tangents at the tip for the three right perturbations of the tip orientation,
     R_L exp(e_d): dR = R_L hat(e_d), the follower wrench turning with it, p fixed."""
@@ -701,7 +707,7 @@ def _orientation_seeds(y, tip, load_scale, tangents, dn, wrench):
             tangents[12 + k, d] = wrench[3 + k]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _clamp_tangent(m0x, m0y, m0z, dmx, dmy, dmz, base):
     """Derivative of `_clamp`'s rotation vector along a change (dmx, dmy, dmz) of the base moment."""
     dx = base[BASE_COMPLIANCE] * dmx
@@ -726,7 +732,7 @@ def _clamp_tangent(m0x, m0y, m0z, dmx, dmy, dmz, base):
     return dx, dy, dz
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _residual_tangents(y, base, tangents, work, out):
     """Derivatives of `_clamp_residual` along each tangent (columns of ``tangents``) into the
     columns of ``out`` (3, D): the chain rule through the clamp (compliance, play) and
@@ -793,7 +799,7 @@ def _residual_tangents(y, base, tangents, work, out):
         out[2, d] = dscale * vz + scale * dvz
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _shoot_tangents(resolution, profile, tip, base, beta, load_scale, residual, derivatives, y, tangents, dn, work,
                     nodes_p, nodes_r, store):
     """A Cosserat `shoot` from the tip state in ``y`` (`_tip_state`) that carries tangents
@@ -808,7 +814,7 @@ def _shoot_tangents(resolution, profile, tip, base, beta, load_scale, residual, 
     _residual_tangents(y, base, tangents, work, derivatives)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def shoot_with_jacobian(resolution, x, reference, profile, tip, base, beta, load_scale, residual, jacobian, y,
                         work, nodes_p, nodes_r, store):
     """`shoot` for the Cosserat rod that also writes the exact Jacobian of the residual in
@@ -820,12 +826,12 @@ def shoot_with_jacobian(resolution, x, reference, profile, tip, base, beta, load
                     nodes_p, nodes_r, store)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _norm3(v):
     return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _solve3(a, b, out):
     """Cramer's rule on a 3x3 system; returns False when (nearly) singular."""
     c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
@@ -853,7 +859,7 @@ def _solve3(a, b, out):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _finite_difference_jacobian(kind, resolution, x, reference, r, profile, tip, base, beta, load_scale,
                                 jacobian, y, work, nodes_p, nodes_r):
     trial = x.copy()
@@ -869,7 +875,7 @@ def _finite_difference_jacobian(kind, resolution, x, reference, r, profile, tip,
         trial[j] = x[j]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _reanchor(reference, x, work, scratch):
     """reference <- reference exp(x): later unknowns are small rotations about it."""
     _so3_exp(x[0], x[1], x[2], work)
@@ -881,7 +887,7 @@ def _reanchor(reference, x, work, scratch):
             reference[i, j] = scratch[i, j]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def turned(rotation, rotation_vector):
     """rotation exp(rotation_vector), as a new matrix: a rotation turned in its own frame."""
     out = rotation.copy()
@@ -889,7 +895,7 @@ def turned(rotation, rotation_vector):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, base, beta, load_scale,
           tolerance, max_iterations, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation, info):
     """Damped quasi-Newton on the shooting residual; the unknown is a small rotation of
@@ -990,14 +996,14 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
     info[3] = jacobian_evaluations
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def sensor_rotation(base_mounting, rotation, tip_mounting):
     """base_mounting^T rotation tip_mounting, as a new matrix: what two orientation sensors
     mounted so on the base and the tip read."""
     return base_mounting.T @ (rotation @ tip_mounting)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def relative_rotation_vector(rotation_a, rotation_b, out):
     """Rotation vector (rad, in frame a) of R_a^T R_b, through its quaternion so it is
     accurate for small and large angles alike; returns the angle."""
@@ -1020,7 +1026,7 @@ def relative_rotation_vector(rotation_a, rotation_b, out):
     return theta
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def body_twist(rotation_a, position_a, rotation_b, position_b, out):
     """Twist (v, omega) in frame a with exp(twist) = g_a^-1 g_b: se(3) logarithm of the
     relative pose, for poses given as rotation matrices and positions."""
@@ -1053,7 +1059,7 @@ def body_twist(rotation_a, position_a, rotation_b, position_b, out):
     out[5] = oz
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def tip_wrench_sensitivity(kind, resolution, reference, profile, tip, base, beta, components, steps, length,
                            jacobian, columns):
     """Sensitivity of the tip pose to tip follower wrench components (w_d: 0-2 force, 3-5
