@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .data import Dataset, read_csv
+from .data import Dataset, read_csv, read_csv_steps
 from .errors import UserError
 from .files import check_regular_input
 from .logs import dataset_from_log
@@ -23,9 +23,23 @@ def load_dataset(path: str | Path, profile: RigProfile | str | Path | None) -> D
         profile embedded in it when None.
     """
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix == ".mcap":
+    if path.suffix.lower() == ".mcap":
         return dataset_from_log(path, profile)
+    return read_csv(path, _csv_profile(path, profile))
+
+
+def load_steps(path: str | Path, profile: RigProfile | str | Path | None) -> Dataset:
+    """``load_dataset(path, profile).quasistatic_steps()``; a CSV table is reduced as it
+    is read, so a large one never sits whole in memory."""
+    path = Path(path)
+    if path.suffix.lower() == ".mcap":
+        return dataset_from_log(path, profile).quasistatic_steps()
+    return read_csv_steps(path, _csv_profile(path, profile))
+
+
+def _csv_profile(path: Path, profile: RigProfile | str | Path | None) -> RigProfile:
+    """The profile of a CSV table's rig, once ``path`` is known to be a readable table."""
+    suffix = path.suffix.lower()
     if suffix != ".csv":
         raise UserError(f"{path}: unknown data format {suffix or '(no suffix)'!r}; expected a .csv file "
                         "(see hydrojet_bench/data/csv_io.py for the columns) with --profile, or a session log (.mcap)")
@@ -35,4 +49,4 @@ def load_dataset(path: str | Path, profile: RigProfile | str | Path | None) -> D
     if not isinstance(profile, RigProfile):
         profile = load_profile(profile)
     check_regular_input(path)  # a FIFO would block the reader forever
-    return read_csv(path, profile)
+    return profile

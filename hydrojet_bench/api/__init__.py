@@ -34,7 +34,7 @@ from ..errors import ConvergenceError, UserError
 from ..estimation import OnlineSettings
 from ..estimation.calibration import (DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_dataset,
                                       fit_mask, rows_that_identify)
-from ..inputs import load_dataset
+from ..inputs import load_dataset, load_steps
 from ..logs.condition import log_condition
 from ..model_choice import COSSERAT, ModelChoice, ModelDefaults, choose_model
 from ..params_io import calibration_parameter_file, effect_specs
@@ -56,8 +56,8 @@ def load(path: str | Path, profile: Profile = None) -> Measurements:
     path = Path(path)
     if profile is None and path.suffix.lower() != ".mcap":
         profile = "sim"
-    dataset = load_dataset(path, profile)
-    return Measurements(path, dataset.profile, dataset.quasistatic_steps(), _log_damage(path))
+    steps = load_steps(path, profile)
+    return Measurements(path, steps.profile, steps, _log_damage(path))
 
 
 def calibrate(data: Data, *, model: str | None = None, effects: Sequence[str] = (), params: Params = None,

@@ -7,7 +7,7 @@ import argparse
 from pathlib import Path
 
 from ..errors import UserError
-from ..inputs import load_dataset
+from .. import inputs
 from ..data.dataset import Dataset
 from ..models import MODELS
 from ..profile import RigProfile
@@ -49,8 +49,8 @@ def load_steps(path: Path, profile: str | None) -> tuple[RigProfile, Dataset]:
     profile, a session log brings its own and a CSV file gets "sim"."""
     if profile is None and Path(path).suffix.lower() != ".mcap":
         profile = "sim"
-    dataset = load_dataset(path, profile)
-    return dataset.profile, dataset.quasistatic_steps()
+    steps = inputs.load_steps(path, profile)
+    return steps.profile, steps
 
 
 def comparison_steps(path: Path, profile: str | None,

@@ -6,11 +6,11 @@ session logs; this package knows nothing of logs (the logs package builds on it)
 
 from __future__ import annotations
 
-from .csv_io import KNOWN_COLUMNS, OPTIONAL_COLUMNS, REQUIRED_COLUMNS, read_csv, write_csv
+from .csv_io import KNOWN_COLUMNS, OPTIONAL_COLUMNS, REQUIRED_COLUMNS, read_csv, read_csv_steps, write_csv
 from .dataset import (UNUSABLE, Dataset, SampleFlag, average_quaternions, saturation_flags,
                       steps_from_runs)
 
 __all__ = [
     "KNOWN_COLUMNS", "OPTIONAL_COLUMNS", "REQUIRED_COLUMNS", "UNUSABLE", "Dataset", "SampleFlag",
-    "average_quaternions", "read_csv", "saturation_flags", "steps_from_runs", "write_csv",
+    "average_quaternions", "read_csv", "read_csv_steps", "saturation_flags", "steps_from_runs", "write_csv",
 ]

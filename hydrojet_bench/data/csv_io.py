@@ -124,76 +124,195 @@ def read_csv(path: str | Path, profile: RigProfile) -> Dataset:
 
     The file is streamed in blocks of rows, each parsed to numbers before the next is
     read: holding every cell as a Python string at once cost ~8x the file's size."""
-    path = Path(path)
+    return Dataset.concatenate(list(_checked_blocks(Path(path), profile)))
+
+
+def read_csv_steps(path: str | Path, profile: RigProfile, window_s: float | None = 1.0) -> Dataset:
+    """``read_csv(path, profile).quasistatic_steps(window_s)``, the same rows and the same
+    errors, without ever holding more than one block and the step it ends in: a
+    calibration needs only the settled steps, and a file of 229,000 rows held whole took
+    half again its size in memory on top of the interpreter's 200 MB."""
+    reduced: list[Dataset] = []
+    pending: Dataset | None = None
+    for block in _checked_blocks(Path(path), profile):
+        rows = block if pending is None else Dataset.concatenate([pending, block])
+        # The last run of the block may go on in the next one: carried, not reduced yet.
+        last_run = _last_run_start(rows)
+        if last_run:
+            reduced.append(rows.select(np.arange(last_run)).quasistatic_steps(window_s))
+        pending = rows.select(np.arange(last_run, len(rows)))
+    assert pending is not None  # _checked_blocks refuses a file without data rows
+    reduced.append(pending.quasistatic_steps(window_s))
+    return Dataset.concatenate(reduced)
+
+
+def _last_run_start(rows: Dataset) -> int:
+    """The first row of the last contiguous (sweep, step) run."""
+    change = np.flatnonzero((rows.sweep[1:] != rows.sweep[:-1]) | (rows.step[1:] != rows.step[:-1]))
+    return int(change[-1]) + 1 if len(change) else 0
+
+
+def _checked_blocks(path: Path, profile: RigProfile) -> Iterator[Dataset]:
+    """The file's rows as datasets of up to _BLOCK_ROWS rows, in order, each checked. A
+    problem in the numbers stops the blocks; the rest of the file is still checked for
+    structure, then the earliest problem is raised (`UserError`)."""
     name = str(path)
     try:
         with path.open(encoding="utf-8-sig") as handle:
-            values, columns, line_numbers = _read_columns(handle, name)
+            yield from _BlockReader(handle, path, profile).blocks()
     except UnicodeDecodeError:
         raise UserError(f"{name}: not UTF-8 text (byte {_first_undecodable_byte(path)}): "
                         "is it really a CSV file?") from None
     except OSError as error:
         raise UserError(f"{name}: cannot read: {error.strerror or error}") from None
-    order = {column: i for i, column in enumerate(columns)}
 
-    def where(row: int, column: str) -> str:
-        return f"{name}, line {line_numbers[row]}, column {column}"
 
-    def cell(row: int, column: str) -> str:
-        """The cell's text as written (messages quote it): read again, only for a message."""
-        return _fields(_line(path, line_numbers[row]))[order[column]].strip()
+class _BlockReader:
+    """Parses and checks one file block by block, carrying across blocks what the checks
+    and the step labels need from the row before."""
 
-    problem = _Problem()
-    # Checks on whole rows, again reporting the earliest.
-    forces = _stacked(values, ("q1", "q2", "q3"))
-    for j, column in enumerate(("q1", "q2", "q3")):
-        negative = np.flatnonzero(forces[:, j] < 0.0)
-        if len(negative):
-            i = int(negative[0])
-            problem.offer(i, order[column], f"{where(i, column)}: jet force must be >= 0 N (a jet cannot "
-                                            f"pull), got {cell(i, column)}")
-    orientations = {}
-    for sensor, quaternion_columns in _QUATERNIONS.items():
-        q = _stacked(values, quaternion_columns)
-        with np.errstate(over="ignore"):  # a 1e308 component: its norm is inf, reported below
-            norm = np.linalg.norm(q, axis=1)
-        bad = np.flatnonzero(~(np.abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE))
-        if len(bad):
-            i = int(bad[0])
-            first = min(order[c] for c in quaternion_columns)
-            problem.offer(i, first, f"{where(i, ','.join(quaternion_columns))}: not a unit quaternion "
-                                    f"(norm {norm[i]:.6g}; expected within {QUATERNION_NORM_TOLERANCE:g} of 1)")
-        orientations[sensor] = q
-    time = values["t"]
-    backwards = np.flatnonzero(np.diff(time) < 0.0)
-    if len(backwards):
-        i = int(backwards[0]) + 1
-        problem.offer(i, order["t"], f"{where(i, 't')}: time goes backwards ({cell(i, 't')} s "
-                                     f"after {cell(i - 1, 't')} s on line {line_numbers[i - 1]})")
-    if "sweep" in values:
-        low = np.flatnonzero(values["sweep"] < -1)
+    def __init__(self, handle: TextIO, path: Path, profile: RigProfile) -> None:
+        self.handle, self.path, self.name, self.profile = handle, path, str(path), profile
+        self.problem = _Problem()
+        self.first_row = 0  # of the current block, counting every data row of the file
+        self.previous: Dataset | None = None  # the last row of the previous block
+        self.previous_line = 0
+
+    def blocks(self) -> Iterator[Dataset]:
+        lines = _lines(self.handle)
+        header_line = 0
+        header = None
+        for header_line, line in enumerate(lines, start=1):
+            if line.strip() and not _is_comment(line):
+                header = line
+                break
+        if header is None:
+            raise UserError(f"{self.name}: no header row; expected a line naming the columns "
+                            f"({', '.join(REQUIRED_COLUMNS)}, ...)")
+        self.columns = _parse_header(next(csv.reader([header])), f"{self.name}, line {header_line}")
+        self.order = {column: i for i, column in enumerate(self.columns)}
+        width = len(self.columns)
+        block: list[list[str]] = []
+        block_lines = array.array("q")
+        for number, line in enumerate(lines, start=header_line + 1):
+            if not line.strip():
+                continue
+            if _is_comment(line):
+                raise UserError(f"{self.name}, line {number}: comment lines (#) are only allowed before the header row")
+            fields = _fields(line)
+            if len(fields) < width:
+                raise UserError(f"{self.name}, line {number}, column {self.columns[len(fields)]}: missing (the row has "
+                                f"{len(fields)} fields, the header {width} columns)")
+            if len(fields) > width:
+                raise UserError(f"{self.name}, line {number}, column {width + 1}: the row has {len(fields)} fields "
+                                f"but the header names only {width} columns")
+            block.append(fields)
+            block_lines.append(number)
+            if len(block) == _BLOCK_ROWS:
+                yield from self._dataset(block, block_lines)
+                block, block_lines = [], array.array("q")
+        if block:
+            yield from self._dataset(block, block_lines)
+        if self.first_row == 0:
+            raise UserError(f"{self.name}: the header (line {header_line}) is followed by no data rows")
+        if self.problem.key is not None:
+            raise UserError(self.problem.message)
+
+    def _dataset(self, block: list[list[str]], line_numbers: array.array) -> Iterator[Dataset]:
+        """The block as a checked dataset (none once a problem was found)."""
+        first_row = self.first_row
+        self.first_row += len(block)
+        if self.problem.key is not None:
+            # Later rows cannot hold an earlier problem: only the structure is still checked.
+            return
+        problem, order = self.problem, self.order
+
+        def where(row: int, column: str) -> str:
+            """``row`` counts from the block's first row."""
+            return f"{self.name}, line {line_numbers[row]}, column {column}"
+
+        def cell(row: int, column: str) -> str:
+            """The cell's text as written (messages quote it): read again, only for a message."""
+            return _fields(_line(self.path, line_numbers[row]))[order[column]].strip()
+
+        def where_in_file(row: int, column: str) -> str:
+            return where(row - first_row, column)
+
+        values = {}
+        for j, strings in enumerate(zip(*block)):
+            column = self.columns[j]
+            parsed = _parse_numbers(strings, column, problem, j, where_in_file, first_row,
+                                    integer=column in LABEL_COLUMNS)
+            if parsed is not None:
+                values[column] = parsed
+        if problem.key is not None:
+            return
+        # Checks on whole rows, again reporting the earliest.
+        forces = _stacked(values, ("q1", "q2", "q3"))
+        for j, column in enumerate(("q1", "q2", "q3")):
+            negative = np.flatnonzero(forces[:, j] < 0.0)
+            if len(negative):
+                i = int(negative[0])
+                problem.offer(first_row + i, order[column], f"{where(i, column)}: jet force must be >= 0 N "
+                                                            f"(a jet cannot pull), got {cell(i, column)}")
+        orientations = {}
+        for sensor, quaternion_columns in _QUATERNIONS.items():
+            q = _stacked(values, quaternion_columns)
+            with np.errstate(over="ignore"):  # a 1e308 component: its norm is inf, reported below
+                norm = np.linalg.norm(q, axis=1)
+            bad = np.flatnonzero(~(np.abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE))
+            if len(bad):
+                i = int(bad[0])
+                first = min(order[c] for c in quaternion_columns)
+                problem.offer(first_row + i, first, f"{where(i, ','.join(quaternion_columns))}: not a unit "
+                                                    f"quaternion (norm {norm[i]:.6g}; expected within "
+                                                    f"{QUATERNION_NORM_TOLERANCE:g} of 1)")
+            orientations[sensor] = q
+        time = values["t"]
+        before = self.previous.time_s[-1:] if self.previous is not None else time[:0]
+        backwards = np.flatnonzero(np.diff(np.concatenate([before, time])) < 0.0) + 1 - len(before)
+        if len(backwards):
+            i = int(backwards[0])
+            if i > 0:
+                earlier, earlier_line = cell(i - 1, "t"), line_numbers[i - 1]
+            else:
+                earlier = _fields(_line(self.path, self.previous_line))[order["t"]].strip()
+                earlier_line = self.previous_line
+            problem.offer(first_row + i, order["t"], f"{where(i, 't')}: time goes backwards ({cell(i, 't')} s "
+                                                     f"after {earlier} s on line {earlier_line})")
+        rows = len(time)
+        sweep = values.get("sweep", np.full(rows, -1, dtype=np.int64))
+        low = np.flatnonzero(sweep < -1)
         if len(low):
             i = int(low[0])
-            problem.offer(i, order["sweep"], f"{where(i, 'sweep')}: must be >= 0, or -1 for calibration or "
-                                             f"unlabelled rows, got {cell(i, 'sweep')}")
-    if problem.key is not None:
-        raise UserError(problem.message)
+            problem.offer(first_row + i, order["sweep"], f"{where(i, 'sweep')}: must be >= 0, or -1 for "
+                                                         f"calibration or unlabelled rows, got {cell(i, 'sweep')}")
+        if problem.key is not None:
+            return
+        step = values["step"] if "step" in values else self._steps_from_runs(sweep, forces)
+        positions = {sensor: (_stacked(values, triplet) if triplet[0] in values else None)
+                     for sensor, triplet in POSITION_COLUMNS.items()}
+        try:
+            dataset = Dataset(
+                time_s=time, jet_forces_n=forces,
+                base_orientation=orientations["base"], tip_orientation=orientations["tip"],
+                base_position_m=positions["base"], tip_position_m=positions["tip"],
+                sweep=sweep, step=step, flags=saturation_flags(forces, self.profile),
+                profile=self.profile, source=self.name,
+            )
+        except ValueError as error:  # the checks above should leave nothing for Dataset to find
+            raise UserError(f"{self.name}: {error}") from None
+        self.previous, self.previous_line = dataset.select([-1]), line_numbers[-1]
+        yield dataset
 
-    rows = len(time)
-    sweep = values.get("sweep", np.full(rows, -1, dtype=np.int64))
-    step = values["step"] if "step" in values else steps_from_runs(sweep, forces)
-    positions = {sensor: (_stacked(values, triplet) if triplet[0] in values else None)
-                 for sensor, triplet in POSITION_COLUMNS.items()}
-    try:
-        return Dataset(
-            time_s=time, jet_forces_n=forces,
-            base_orientation=orientations["base"], tip_orientation=orientations["tip"],
-            base_position_m=positions["base"], tip_position_m=positions["tip"],
-            sweep=sweep, step=step, flags=saturation_flags(forces, profile),
-            profile=profile, source=name,
-        )
-    except ValueError as error:  # the checks above should leave nothing for Dataset to find
-        raise UserError(f"{name}: {error}") from None
+    def _steps_from_runs(self, sweep: np.ndarray, forces: np.ndarray) -> np.ndarray:
+        """`steps_from_runs` numbering continued from the previous block's last row."""
+        steps = steps_from_runs(sweep, forces)
+        previous = self.previous
+        if previous is None:
+            return steps
+        goes_on = sweep[0] == previous.sweep[-1] and np.array_equal(forces[0], previous.jet_forces_n[-1])
+        return steps + previous.step[-1] + (0 if goes_on else 1)
 
 
 def _stacked(values: dict[str, np.ndarray], columns: tuple[str, ...]) -> np.ndarray:
@@ -201,9 +320,10 @@ def _stacked(values: dict[str, np.ndarray], columns: tuple[str, ...]) -> np.ndar
     return np.column_stack([values.pop(column) for column in columns])
 
 
-# Rows parsed per block: big enough that numpy's per-call cost vanishes, small enough
-# that the block's strings (~60 bytes a cell) stay a few MB.
-_BLOCK_ROWS = 8192
+# Rows parsed per block: big enough that numpy's per-call cost vanishes (blocks of 1024
+# and 2048 rows read the perf CSV equally fast), small enough that the block's strings
+# (~60 bytes a cell, ~3 MB) stay small beside the interpreter: 8192 held 10 MB more.
+_BLOCK_ROWS = 2048
 
 
 def _fields(line: str) -> list[str]:
@@ -231,76 +351,6 @@ def _first_undecodable_byte(path: Path) -> int:
     except UnicodeDecodeError as error:
         return error.start
     raise AssertionError("a decoding error that decoding the whole file does not repeat")  # pragma: no cover
-
-
-def _read_columns(handle: TextIO, name: str) -> tuple[dict[str, np.ndarray], list[str], np.ndarray]:
-    """Header and cells, checked and parsed block by block. Returns the numeric columns,
-    the header's column names and each data row's line number. Structural problems
-    (comments after the header, wrong field counts) raise at once, wherever they are;
-    number problems are collected and the earliest raised once every row was checked."""
-    lines = _lines(handle)
-    header_line = 0
-    header = None
-    for header_line, line in enumerate(lines, start=1):
-        if line.strip() and not _is_comment(line):
-            header = line
-            break
-    if header is None:
-        raise UserError(f"{name}: no header row; expected a line naming the columns "
-                        f"({', '.join(REQUIRED_COLUMNS)}, ...)")
-    columns = _parse_header(next(csv.reader([header])), f"{name}, line {header_line}")
-    width = len(columns)
-    integer = [column in LABEL_COLUMNS for column in columns]
-    line_numbers = array.array("q")
-    blocks: list[list[np.ndarray]] = [[] for _ in columns]
-    problem = _Problem()
-
-    def where(row: int, column: str) -> str:
-        return f"{name}, line {line_numbers[row]}, column {column}"
-
-    block: list[list[str]] = []
-    first_row = 0
-
-    def parse_block() -> None:
-        # After a problem only the structure is still checked: later rows cannot hold an
-        # earlier problem.
-        if problem.key is None:
-            for j, strings in enumerate(zip(*block)):
-                parsed = _parse_numbers(strings, columns[j], problem, j, where, first_row, integer=integer[j])
-                if parsed is not None:
-                    blocks[j].append(parsed)
-
-    for number, line in enumerate(lines, start=header_line + 1):
-        if not line.strip():
-            continue
-        if _is_comment(line):
-            raise UserError(f"{name}, line {number}: comment lines (#) are only allowed before the header row")
-        fields = _fields(line)
-        if len(fields) < width:
-            raise UserError(f"{name}, line {number}, column {columns[len(fields)]}: missing (the row has "
-                            f"{len(fields)} fields, the header {width} columns)")
-        if len(fields) > width:
-            raise UserError(f"{name}, line {number}, column {width + 1}: the row has {len(fields)} fields "
-                            f"but the header names only {width} columns")
-        block.append(fields)
-        line_numbers.append(number)
-        if len(block) == _BLOCK_ROWS:
-            parse_block()
-            first_row += len(block)
-            block = []
-    if block:
-        parse_block()
-    if not line_numbers:
-        raise UserError(f"{name}: the header (line {header_line}) is followed by no data rows")
-    if problem.key is not None:
-        raise UserError(problem.message)
-    values = {}
-    for column, parts in zip(columns, blocks):
-        # Each column's blocks freed as soon as it is joined: joining every column before
-        # freeing any held the file's numbers twice.
-        values[column] = np.concatenate(parts)
-        parts.clear()
-    return values, columns, np.frombuffer(line_numbers, dtype=np.int64)
 
 
 def _parse_numbers(strings: tuple[str, ...], column: str, problem: _Problem, column_order: int,

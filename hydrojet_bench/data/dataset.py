@@ -250,19 +250,18 @@ class Dataset:
 
     @classmethod
     def concatenate(cls, parts: Sequence[Dataset]) -> Dataset:
-        """The rows of ``parts`` (same profile, in time order) as one dataset; positions
-        are kept only if every part has them."""
+        """The rows of ``parts`` (same profile, in time order) as one dataset; each
+        sensor's positions are kept only if every part has them."""
         if not parts:
             raise ValueError("concatenate needs at least one dataset")
-        with_positions = all(part.has_positions for part in parts)
 
-        def join(name: str) -> np.ndarray:
-            return np.concatenate([getattr(part, name) for part in parts])
+        def join(name: str) -> np.ndarray | None:
+            arrays = [getattr(part, name) for part in parts]
+            return None if any(array is None for array in arrays) else np.concatenate(arrays)
 
         return replace(parts[0], time_s=join("time_s"), jet_forces_n=join("jet_forces_n"),
                        base_orientation=join("base_orientation"), tip_orientation=join("tip_orientation"),
-                       base_position_m=join("base_position_m") if with_positions else None,
-                       tip_position_m=join("tip_position_m") if with_positions else None,
+                       base_position_m=join("base_position_m"), tip_position_m=join("tip_position_m"),
                        sweep=join("sweep"), step=join("step"), flags=join("flags"))
 
     def calibration_rows(self) -> Dataset:

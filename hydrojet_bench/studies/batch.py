@@ -48,13 +48,13 @@ def log_row(task: LogTask, columns: dict[str, str], error: str | None = None) ->
 
 def diagnose_log(task: LogTask) -> dict:
     """One row: the log's diagnosis; never raises."""
-    from ..inputs import load_dataset
+    from ..inputs import load_steps
 
     started = time.perf_counter()
     row = log_row(task, DIAGNOSE_COLUMNS)
     try:
         profile = task.profile if task.profile is not None or Path(task.path).suffix.lower() == ".mcap" else "sim"
-        steps = load_dataset(task.path, profile).quasistatic_steps()
+        steps = load_steps(task.path, profile)
         diagnosis = diagnose(steps, task.model, settings=DiagnosisSettings(workers=1))
         winner = diagnosis.winner
         row.update(steps=len(steps), verdict=diagnosis.verdict, alternatives=",".join(diagnosis.alternatives),

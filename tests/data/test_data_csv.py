@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hydrojet_bench.data import (REQUIRED_COLUMNS, Dataset, SampleFlag, read_csv,
+from hydrojet_bench.data import (REQUIRED_COLUMNS, Dataset, SampleFlag, csv_io, read_csv, read_csv_steps,
                                  saturation_flags, write_csv)
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.inputs import load_dataset
@@ -110,11 +111,16 @@ def test_forces_above_the_profile_limit_are_flagged_not_dropped(tmp_path: Path) 
          "non-unit-tip", "non-unit-base", "time-backwards", "fractional-sweep", "sweep-below-minus-one",
          "negative-force", "late-comment", "digit-separator"],
 )
-def test_every_bad_row_names_file_line_and_column(tmp_path: Path, text: str, line: int,
-                                                  column: str | None, expected: str) -> None:
+@pytest.mark.parametrize("block_rows", [1, 3, 8192], ids=lambda rows: f"blocks-of-{rows}")
+@pytest.mark.parametrize("reader", [read_csv, read_csv_steps], ids=lambda reader: reader.__name__)
+def test_every_bad_row_names_file_line_and_column(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, text: str,
+                                                  line: int, column: str | None, expected: str, block_rows: int,
+                                                  reader: Callable[[Path, object], Dataset]) -> None:
+    # Blocks of one row put every check on a block boundary (time order, step labels).
+    monkeypatch.setattr(csv_io, "_BLOCK_ROWS", block_rows)
     path = write(tmp_path, text)
     with pytest.raises(UserError) as info:
-        read_csv(path, PROFILE)
+        reader(path, PROFILE)
     message = str(info.value)
     prefix = f"{path}, line {line}" + (f", column {column}:" if column else ":")
     assert message.startswith(prefix), message
@@ -230,3 +236,52 @@ def test_a_selection_without_rows_is_an_empty_dataset(tmp_path: Path) -> None:
     dataset = read_csv(write(tmp_path, table()), PROFILE)
     empty = dataset.select(dataset.sweep == 99)
     assert len(empty) == 0 and len(empty.calibration_rows()) == 0
+
+
+# --- reduced to steps as it is read ------------------------------------------------------
+
+
+@st.composite
+def stepped_datasets(draw: st.DrawFn) -> Dataset:
+    """Runs of a few rows each (a step), some flagged, times rising: what a session records."""
+    runs = draw(st.lists(st.tuples(st.integers(1, 5), st.sampled_from([-1, 0, 1]),
+                                   st.sampled_from([0.0, 0.05, 0.2])), min_size=1, max_size=8))
+    forces = np.concatenate([np.tile([force, 0.0, 0.01], (rows, 1)) for rows, _, force in runs])
+    n = len(forces)
+    tip = np.array(draw(st.lists(unit_quaternion, min_size=n, max_size=n)))
+    return Dataset(time_s=np.cumsum(draw(st.lists(st.sampled_from([0.0, 0.3, 0.7]), min_size=n, max_size=n))),
+                   jet_forces_n=forces, base_orientation=np.tile([0.0, 1.0, 0.0, 0.0], (n, 1)), tip_orientation=tip,
+                   tip_position_m=np.array(draw(st.lists(st.tuples(finite, finite, finite), min_size=n, max_size=n))),
+                   sweep=np.concatenate([[sweep] * rows for rows, sweep, _ in runs]),
+                   step=np.repeat(np.arange(len(runs)) * draw(st.integers(0, 1)), [rows for rows, _, _ in runs]),
+                   flags=saturation_flags(forces, PROFILE), profile=PROFILE, source="steps")
+
+
+@settings(max_examples=80, deadline=None)
+@given(stepped_datasets(), st.integers(1, 6), st.booleans())
+def test_steps_read_block_by_block_are_the_steps_of_the_whole_file(original: Dataset, block_rows: int,
+                                                                    labelled: bool) -> None:
+    """Without a step column, steps are numbered across block boundaries as in one piece."""
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "steps.csv"
+        write_csv(original, path)
+        if not labelled:  # the step column is the last: drop it, the reader numbers the runs
+            lines = path.read_text().splitlines()
+            path.write_text("\n".join(line if line.startswith("#") else line.rsplit(",", 1)[0] for line in lines))
+        rows = read_csv(path, PROFILE)
+        whole = rows.quasistatic_steps()
+        csv_io._BLOCK_ROWS, default = block_rows, csv_io._BLOCK_ROWS
+        try:
+            streamed = read_csv_steps(path, PROFILE)
+            blocks = read_csv(path, PROFILE)
+        finally:
+            csv_io._BLOCK_ROWS = default
+    assert streamed.source == whole.source
+    for name in ("time_s", "jet_forces_n", "base_orientation", "tip_orientation", "base_position_m",
+                 "tip_position_m", "sweep", "step", "flags"):
+        expected, actual = getattr(whole, name), getattr(streamed, name)
+        if expected is None:
+            assert actual is None and getattr(blocks, name) is None, name
+        else:
+            np.testing.assert_array_equal(actual, expected, err_msg=name)
+    np.testing.assert_array_equal(blocks.step, rows.step)
