@@ -244,7 +244,7 @@ def test_a_selection_without_rows_is_an_empty_dataset(tmp_path: Path) -> None:
 @st.composite
 def stepped_datasets(draw: st.DrawFn) -> Dataset:
     """Runs of a few rows each (a step), some flagged, times rising: what a session records."""
-    runs = draw(st.lists(st.tuples(st.integers(1, 5), st.sampled_from([-1, 0, 1]),
+    runs = draw(st.lists(st.tuples(st.integers(1, 12), st.sampled_from([-1, 0, 1]),
                                    st.sampled_from([0.0, 0.05, 0.2])), min_size=1, max_size=8))
     forces = np.concatenate([np.tile([force, 0.0, 0.01], (rows, 1)) for rows, _, force in runs])
     n = len(forces)
@@ -261,7 +261,8 @@ def stepped_datasets(draw: st.DrawFn) -> Dataset:
 @given(stepped_datasets(), st.integers(1, 6), st.booleans())
 def test_steps_read_block_by_block_are_the_steps_of_the_whole_file(original: Dataset, block_rows: int,
                                                                     labelled: bool) -> None:
-    """Without a step column, steps are numbered across block boundaries as in one piece."""
+    """Without a step column, steps are numbered across block boundaries as in one piece;
+    a step longer than the 1 s window and than a block is carried as its last second."""
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "steps.csv"
         write_csv(original, path)
