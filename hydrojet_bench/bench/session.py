@@ -227,7 +227,7 @@ class Session:
         completed = 0
         with LogWriter(request.log_path, metadata=metadata, flush_interval_s=request.settings.session.flush_interval_s,
                        overwrite=request.overwrite_log, listener=self.on_log_message,
-                       reorder_window_s=REORDER_WINDOW_WALL_S * self.clock.time_scale) as log:
+                       reorder_window_s=REORDER_WINDOW_WALL_S * self.clock.time_scale, background=True) as log:
             self._log = log
             self._write_parameters()
             for warning in request.warnings:

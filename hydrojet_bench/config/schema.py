@@ -341,8 +341,9 @@ class SessionTable(Table, kw_only=True):
     window_s: Positive = 1.0          # average the last window_s of each step, session s
     # session seconds per wall second (> 1 only on the sim rig)
     time_scale: Annotated[float, msgspec.Meta(gt=0.0, le=MAX_TIME_SCALE)] = 1.0
-    # Log flush period, wall s: what a crash may lose. Each flush compresses the open chunk on
-    # the event loop; at 0.25 s the chunks stay small enough not to stall the 100 Hz IMU drain.
+    # Log flush period, wall s: what a crash may lose. The session's log compresses and
+    # indexes each chunk on its writer thread, which holds the interpreter for part of it:
+    # at 0.25 s a chunk stays small enough not to stall the 100 Hz IMU drain.
     flush_interval_s: Positive = 0.25
 
     def __post_init__(self) -> None:

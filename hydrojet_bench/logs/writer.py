@@ -6,6 +6,13 @@ each write) and on `LogWriter.flush`; a chunk is all-or-nothing, so a SIGKILL lo
 most the data of the last ``flush_interval_s`` (plus one message interval). No fsync:
 data handed to the OS outlives the process; only a power cut can lose more.
 
+With ``background=True`` (a live session) the MCAP work itself (adding each message to
+the chunk, compressing and indexing it) runs on a writer thread: at the simulated rig's
+rates it took a tenth of the event loop's time, and a chunk's flush held the loop for
+4-6 ms, as long as the IMU FIFOs last. The caller's thread still checks, encodes and
+orders every record and calls the listener; a kill then also loses what the thread had
+not yet taken (at most `_BACKGROUND_POLL_S` more).
+
 Layout: header, `LOG_METADATA_NAME` (format version, wall time of ``t_s = 0``), the
 caller's metadata records, then chunks holding each topic's schema and channel (written
 with its first message) and the messages. `close` adds the summary and footer.
@@ -19,6 +26,8 @@ import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import TracebackType
+import threading
+from collections import deque
 from typing import Any
 
 import msgspec
@@ -66,6 +75,8 @@ class LogWriter:
         runs backwards and chunks do not overlap. A record later than the window is
         logged at the newest time already written (its ``t_s`` keeps the true time).
         0: written as it comes. Held records are written on `close`; a kill loses them.
+    background: do the MCAP work on a writer thread (see the module docstring). An
+        error there (a full disk) is raised by every later `write`, `flush` and `close`.
 
     `write` raises ValueError for a record that is not of a topic's type or that its
     topic's reader would refuse (e.g. NaN where null is not allowed), naming the field.
@@ -74,7 +85,7 @@ class LogWriter:
     def __init__(self, path: str | Path, metadata: Mapping[str, Mapping[str, str]] | None = None,
                  start_time_unix_s: float | None = None, flush_interval_s: float = 1.0, *,
                  overwrite: bool = False, listener: Callable[[str, int, bytes], None] | None = None,
-                 reorder_window_s: float = 0.0) -> None:
+                 reorder_window_s: float = 0.0, background: bool = False) -> None:
         if not flush_interval_s > 0:
             raise ValueError(f"flush_interval_s must be > 0 s, got {flush_interval_s!r}")
         records = _checked_metadata(metadata or {})
@@ -94,18 +105,11 @@ class LogWriter:
         self._written_ns = 0  # the newest log time in the file
         self.late_records = 0  # records later than the reorder window
         self._stream = create_new(self.path, "session log", overwrite=overwrite)
-        # Chunks are closed by time (flush_interval_s); the size limit only caps memory.
-        self._writer = Writer(self._stream, chunk_size=4 * 1024 * 1024, compression=CompressionType.ZSTD)
-        self._writer.start(library=LIBRARY)
-        self._writer.add_metadata(LOG_METADATA_NAME, {"format_version": FORMAT_VERSION,
-                                                      START_TIME_KEY: str(self.start_time_ns)})
-        for name, values in records.items():
-            self._writer.add_metadata(name, values)
-        self._channels: dict[str, int] = {}
         self._listener = listener
-        self._sequence: dict[int, int] = {}
         self._closed = False
-        self.flush()
+        chunks = _Chunks(self._stream, self.flush_interval_s)
+        chunks.start(records, self.start_time_ns)
+        self._chunks: _Chunks | _BackgroundChunks = _BackgroundChunks(chunks, self.path) if background else chunks
 
     # --- writing ------------------------------------------------------------------------
 
@@ -152,8 +156,7 @@ class LogWriter:
     def flush(self) -> None:
         """Close the open chunk and hand everything written so far to the operating system."""
         self._check_open()
-        self._writer.flush()
-        self._last_flush = time.monotonic()
+        self._chunks.flush()
 
     def close(self) -> None:
         """Finish the file (summary, footer) and close it; closing twice is harmless."""
@@ -163,10 +166,10 @@ class LogWriter:
             self._release(None)
         finally:
             self._closed = True
-        try:
-            self._writer.finish()
-        finally:
-            self._stream.close()
+            try:
+                self._chunks.finish()
+            finally:
+                self._stream.close()
 
     def __enter__(self) -> LogWriter:
         return self
@@ -198,8 +201,6 @@ class LogWriter:
         heapq.heappush(self._held, (log_time, next(self._arrivals), topic, data))
         self._newest_ns = max(self._newest_ns, log_time)
         self._release(self._newest_ns - self._reorder_window_ns)
-        if time.monotonic() - self._last_flush >= self.flush_interval_s:
-            self.flush()
 
     def _release(self, up_to_ns: int | None) -> None:
         """Write the held records stamped up to ``up_to_ns`` (None: all), oldest first."""
@@ -214,6 +215,30 @@ class LogWriter:
             self._write_message(topic, written_ns, log_time, data)
 
     def _write_message(self, topic: str, log_time: int, publish_time: int, data: bytes) -> None:
+        self._chunks.add(topic, log_time, publish_time, data)
+        if self._listener is not None:
+            self._listener(topic, log_time, data)
+
+
+class _Chunks:
+    """The MCAP side of a log: channels, sequence numbers, chunks flushed by wall time."""
+
+    def __init__(self, stream: Any, flush_interval_s: float) -> None:
+        # Chunks are closed by time (flush_interval_s); the size limit only caps memory.
+        self._writer = Writer(stream, chunk_size=4 * 1024 * 1024, compression=CompressionType.ZSTD)
+        self._flush_interval_s = flush_interval_s
+        self._channels: dict[str, int] = {}
+        self._sequence: dict[int, int] = {}
+
+    def start(self, metadata: Mapping[str, Mapping[str, str]], start_time_ns: int) -> None:
+        self._writer.start(library=LIBRARY)
+        self._writer.add_metadata(LOG_METADATA_NAME, {"format_version": FORMAT_VERSION,
+                                                      START_TIME_KEY: str(start_time_ns)})
+        for name, values in metadata.items():
+            self._writer.add_metadata(name, values)
+        self.flush()
+
+    def add(self, topic: str, log_time: int, publish_time: int, data: bytes) -> None:
         channel = self._channels.get(topic)
         if channel is None:
             record_type = TOPICS[topic]
@@ -224,8 +249,84 @@ class LogWriter:
         sequence = self._sequence[channel]
         self._sequence[channel] = (sequence + 1) & 0xFFFFFFFF
         self._writer.add_message(channel, log_time=log_time, data=data, publish_time=publish_time, sequence=sequence)
-        if self._listener is not None:
-            self._listener(topic, log_time, data)
+        if time.monotonic() - self._last_flush >= self._flush_interval_s:
+            self.flush()
+
+    def flush(self) -> None:
+        self._writer.flush()
+        self._last_flush = time.monotonic()
+
+    def finish(self) -> None:
+        self._writer.finish()
+
+
+# How often the writer thread takes the messages queued since its last look, s of wall
+# time; and how many it adds before letting other threads have the interpreter (about
+# 0.5 ms of work: the event loop must not wait for the lock longer than that).
+_BACKGROUND_POLL_S = 0.005
+_BACKGROUND_BATCH = 40
+
+
+class _BackgroundChunks:
+    """`_Chunks` on a thread of its own: `add` only queues. `flush` and `finish` wait
+    for the queue to be written; an error on the thread is raised by every later call."""
+
+    def __init__(self, chunks: _Chunks, path: Path) -> None:
+        self._chunks = chunks
+        self._queue: deque[tuple[str, int, int, bytes] | threading.Event] = deque()
+        self._stop = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name=f"log writer {path.name}", daemon=True)
+        self._thread.start()
+
+    def add(self, topic: str, log_time: int, publish_time: int, data: bytes) -> None:
+        self._raise_error()
+        self._queue.append((topic, log_time, publish_time, data))
+
+    def flush(self) -> None:
+        self._raise_error()
+        done = threading.Event()
+        self._queue.append(done)
+        while not done.wait(_BACKGROUND_POLL_S) and self._thread.is_alive():
+            pass  # a thread that failed before taking ``done`` will never set it
+        self._raise_error()
+
+    def finish(self) -> None:
+        self._stop.set()
+        self._thread.join()
+        self._raise_error()
+        self._chunks.finish()
+
+    def _raise_error(self) -> None:
+        # Raised again by every later call: nothing more can reach the file.
+        if self._error is not None:
+            raise self._error
+
+    def _run(self) -> None:
+        queue, chunks = self._queue, self._chunks
+        while True:
+            stopping = self._stop.wait(_BACKGROUND_POLL_S)
+            try:
+                added = 0
+                while queue:
+                    item = queue.popleft()
+                    if isinstance(item, threading.Event):
+                        chunks.flush()
+                        item.set()
+                        continue
+                    chunks.add(*item)
+                    added += 1
+                    if added % _BACKGROUND_BATCH == 0:
+                        time.sleep(0)  # a turn for the event loop's thread
+            except BaseException as error:  # noqa: BLE001 - handed to the caller's thread
+                self._error = error
+                while queue:  # nobody may wait for a flush that will never come
+                    item = queue.popleft()
+                    if isinstance(item, threading.Event):
+                        item.set()
+                return
+            if stopping:
+                return
 
 
 def _checked_metadata(metadata: Mapping[str, Mapping[str, str]]) -> dict[str, dict[str, str]]:

@@ -148,6 +148,50 @@ def test_flush_hands_everything_written_to_the_file(tmp_path: Path) -> None:
     log.close()  # closing twice is harmless
 
 
+def _same_log(path: Path, background: bool) -> bytes:
+    with LogWriter(path, metadata=METADATA, start_time_unix_s=START_TIME_UNIX_S, flush_interval_s=1e6,
+                   reorder_window_s=0.5, background=background) as log:
+        t_s = 0.0
+        for _ in range(3):
+            t_s = write_all_topics(log, t_s)
+            log.write(msgspec.structs.replace(EXAMPLES["/events"], t_s=t_s - 0.2))  # late: reordered
+            log.flush()
+        write_all_topics(log, t_s)  # left for close to write
+    return path.read_bytes()
+
+
+def test_a_log_written_on_the_writer_thread_is_the_same_file(tmp_path: Path) -> None:
+    assert _same_log(tmp_path / "thread.mcap", True) == _same_log(tmp_path / "caller.mcap", False)
+
+
+def test_flush_waits_for_the_writer_thread(tmp_path: Path) -> None:
+    path = tmp_path / "run.mcap"
+    with LogWriter(path, flush_interval_s=1e6, background=True) as log:
+        write_all_topics(log, 0.0)
+        log.flush()
+        assert len(read_log(shutil.copy(path, tmp_path / "after.mcap")).messages) == len(TOPICS)
+
+
+def test_an_error_on_the_writer_thread_is_raised_to_the_caller(tmp_path: Path, monkeypatch) -> None:
+    from hydrojet_bench.logs import writer
+
+    def full_disk(*_: object) -> None:
+        raise OSError(28, "No space left on device")
+
+    path = tmp_path / "run.mcap"
+    log = LogWriter(path, flush_interval_s=1e6, background=True)
+    monkeypatch.setattr(writer._Chunks, "add", full_disk)
+    log.write(EXAMPLES["/events"])
+    with pytest.raises(OSError, match="No space left"):
+        log.flush()
+    with pytest.raises(OSError, match="No space left"):  # nothing is queued for a dead thread
+        log.write(EXAMPLES["/events"])
+    with pytest.raises(OSError, match="No space left"):  # as a full disk fails the footer
+        log.close()
+    assert log._stream.closed
+    log.close()  # closing twice is harmless
+
+
 def test_an_existing_log_is_never_overwritten_unless_asked(tmp_path: Path) -> None:
     path = small_log(tmp_path / "run.mcap", chunks=2)
     before = path.read_bytes()
