@@ -196,10 +196,23 @@ class _BlockReader:
                             f"({', '.join(REQUIRED_COLUMNS)}, ...)")
         self.columns = _parse_header(next(csv.reader([header])), f"{self.name}, line {header_line}")
         self.order = {column: i for i, column in enumerate(self.columns)}
+        for block, line_numbers in self._row_blocks(lines, header_line + 1):
+            dataset = self._dataset(block, line_numbers)
+            del block  # its strings go before the next block's are read
+            if dataset is not None:
+                yield dataset
+        if self.first_row == 0:
+            raise UserError(f"{self.name}: the header (line {header_line}) is followed by no data rows")
+        if self.problem.key is not None:
+            raise UserError(self.problem.message)
+
+    def _row_blocks(self, lines: Iterator[str], first_line: int) -> Iterator[tuple[list[list[str]], array.array]]:
+        """The data rows' fields and line numbers, _BLOCK_ROWS rows at a time (the last
+        block may be shorter). Structural problems raise at once, wherever they are."""
         width = len(self.columns)
         block: list[list[str]] = []
-        block_lines = array.array("q")
-        for number, line in enumerate(lines, start=header_line + 1):
+        line_numbers = array.array("q")
+        for number, line in enumerate(lines, start=first_line):
             if not line.strip():
                 continue
             if _is_comment(line):
@@ -212,24 +225,20 @@ class _BlockReader:
                 raise UserError(f"{self.name}, line {number}, column {width + 1}: the row has {len(fields)} fields "
                                 f"but the header names only {width} columns")
             block.append(fields)
-            block_lines.append(number)
+            line_numbers.append(number)
             if len(block) == _BLOCK_ROWS:
-                yield from self._dataset(block, block_lines)
-                block, block_lines = [], array.array("q")
+                yield block, line_numbers
+                block, line_numbers = [], array.array("q")
         if block:
-            yield from self._dataset(block, block_lines)
-        if self.first_row == 0:
-            raise UserError(f"{self.name}: the header (line {header_line}) is followed by no data rows")
-        if self.problem.key is not None:
-            raise UserError(self.problem.message)
+            yield block, line_numbers
 
-    def _dataset(self, block: list[list[str]], line_numbers: array.array) -> Iterator[Dataset]:
-        """The block as a checked dataset (none once a problem was found)."""
+    def _dataset(self, block: list[list[str]], line_numbers: array.array) -> Dataset | None:
+        """The block as a checked dataset; None once a problem was found."""
         first_row = self.first_row
         self.first_row += len(block)
         if self.problem.key is not None:
             # Later rows cannot hold an earlier problem: only the structure is still checked.
-            return
+            return None
         problem, order = self.problem, self.order
 
         def where(row: int, column: str) -> str:
@@ -251,7 +260,7 @@ class _BlockReader:
             if parsed is not None:
                 values[column] = parsed
         if problem.key is not None:
-            return
+            return None
         # Checks on whole rows, again reporting the earliest.
         forces = _stacked(values, ("q1", "q2", "q3"))
         for j, column in enumerate(("q1", "q2", "q3")):
@@ -293,7 +302,7 @@ class _BlockReader:
             problem.offer(first_row + i, order["sweep"], f"{where(i, 'sweep')}: must be >= 0, or -1 for "
                                                          f"calibration or unlabelled rows, got {cell(i, 'sweep')}")
         if problem.key is not None:
-            return
+            return None
         step = values["step"] if "step" in values else self._steps_from_runs(sweep, forces)
         positions = {sensor: (_stacked(values, triplet) if triplet[0] in values else None)
                      for sensor, triplet in POSITION_COLUMNS.items()}
@@ -308,7 +317,7 @@ class _BlockReader:
         except ValueError as error:  # the checks above should leave nothing for Dataset to find
             raise UserError(f"{self.name}: {error}") from None
         self.previous, self.previous_line = dataset.select([-1]), line_numbers[-1]
-        yield dataset
+        return dataset
 
     def _steps_from_runs(self, sweep: np.ndarray, forces: np.ndarray) -> np.ndarray:
         """`steps_from_runs` numbering continued from the previous block's last row."""

@@ -11,7 +11,7 @@ the chunk, compressing and indexing it) runs on a writer thread: at the simulate
 rates it took a tenth of the event loop's time, and a chunk's flush held the loop for
 4-6 ms, as long as the IMU FIFOs last. The caller's thread still checks, encodes and
 orders every record and calls the listener; a kill then also loses what the thread had
-not yet taken (at most `_BACKGROUND_POLL_S` more).
+not yet taken (about 5 ms of wall time more).
 
 Layout: header, `LOG_METADATA_NAME` (format version, wall time of ``t_s = 0``), the
 caller's metadata records, then chunks holding each topic's schema and channel (written
@@ -22,12 +22,12 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import threading
 import time
+from collections import deque
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import TracebackType
-import threading
-from collections import deque
 from typing import Any
 
 import msgspec
