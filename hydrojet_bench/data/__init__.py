@@ -1,7 +1,8 @@
 """Measurement data: the `Dataset` every analysis consumes, and the CSV contract.
 
-Commands load their input through `hydrojet_bench.inputs.load_dataset`, which also reads
-session logs; this package knows nothing of logs (the logs package builds on it).
+Commands load their input through `hydrojet_bench.inputs` (`load_dataset`, or
+`load_steps` for the settled steps alone), which also reads session logs; this package
+knows nothing of logs (the logs package builds on it).
 """
 
 from __future__ import annotations
