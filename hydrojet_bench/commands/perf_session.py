@@ -48,6 +48,13 @@ def session_protocol_figures(plan=None) -> dict:
             aborted, result = str(error), None
         wall_s = time.perf_counter() - started
     rates = {} if result is None else {rate.stream: rate for rate in result.stream_rates}
+    imu_fraction = rates["imu"].fraction if "imu" in rates else None
+    tracker_fraction = rates["em"].fraction if "em" in rates else None
+    # Said beside the figures, as every other section says "met": a session that aborted
+    # or lost a stream meets nothing.
+    reached = {"wall_s": result is not None and wall_s <= SESSION_WALL_TARGET_S,
+               "imu_rate_fraction": imu_fraction is not None and imu_fraction >= RATE_FRACTION_TARGET,
+               "tracker_rate_fraction": tracker_fraction is not None and tracker_fraction >= RATE_FRACTION_TARGET}
     return {"session_protocol": {
         "steps": len(plan),
         "completed_steps": None if result is None else result.completed_steps,
@@ -57,8 +64,10 @@ def session_protocol_figures(plan=None) -> dict:
         "wall_s": wall_s,
         "target_wall_s": SESSION_WALL_TARGET_S,
         "imu_rate_hz": settings.imu.rate_hz,
-        "imu_rate_fraction": rates["imu"].fraction if "imu" in rates else None,
+        "imu_rate_fraction": imu_fraction,
         "tracker_rate_hz": settings.tracker.rate_hz,
-        "tracker_rate_fraction": rates["em"].fraction if "em" in rates else None,
+        "tracker_rate_fraction": tracker_fraction,
         "target_rate_fraction": RATE_FRACTION_TARGET,
+        "met": all(reached.values()),
+        "missed": [figure for figure, ok in reached.items() if not ok],
     }}

@@ -21,3 +21,9 @@ def test_session_protocol_reports_wall_time_and_rate_fractions_at_the_rigs_rates
     assert figures["wall_s"] >= plan.duration_s / figures["time_scale"]
     for stream in ("imu", "tracker"):
         assert 0 < figures[f"{stream}_rate_fraction"] <= 1.05, figures
+    # Each figure is named as missed exactly when it misses its target.
+    below = {"wall_s": figures["wall_s"] > figures["target_wall_s"],
+             "imu_rate_fraction": figures["imu_rate_fraction"] < figures["target_rate_fraction"],
+             "tracker_rate_fraction": figures["tracker_rate_fraction"] < figures["target_rate_fraction"]}
+    assert figures["missed"] == [figure for figure, missed in below.items() if missed], figures
+    assert figures["met"] is (not figures["missed"])
