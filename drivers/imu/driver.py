@@ -372,8 +372,11 @@ class Icm20948:
         """Drain the FIFO's whole records in one transfer, decoded and calibrated.
 
         Stamps: the newest record was sampled within one output period before the host
-        clock at the start of the read. The first read after a reset stamps it half a
-        period before; later reads continue the previous stamps one period apart while
+        clock just after the FIFO count was read (not before the first register read: the
+        chip goes on sampling while the host reads INT_STATUS_2, and a record newer than
+        the host's time was stamped up to a transfer too early; at the simulated rig's
+        x25 that was half a period, and 0.7 % of the samples found no partner on the
+        other chip). The first read after a reset stamps it half a period before; later reads continue the previous stamps one period apart while
         they stay in that window (so host jitter does not reach them) and move them to
         its nearer edge when they leave it, which only shrinks their error (at most half
         a period) and follows a chip clock that drifts from the host's.
@@ -382,9 +385,9 @@ class Icm20948:
         FIFO unread: a full snapshot-mode FIFO ends in a cut record, and once the host
         pops records in front of it, new ones land after the cut, so no record boundary
         in it can be trusted."""
-        t_s = self.clock()
         overflowed = bool(self.read_register(0, reg.INT_STATUS_2) & reg.INT_STATUS_2_FIFO_OVERFLOW)
         count_bytes = self.read_registers(0, reg.FIFO_COUNTH, 2)
+        t_s = self.clock()
         records, partial = divmod(((count_bytes[0] & 0x1F) << 8) | count_bytes[1], reg.FIFO_RECORD_LENGTH)
         if overflowed or partial:
             self.reset_fifo()

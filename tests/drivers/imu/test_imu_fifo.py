@@ -45,6 +45,49 @@ def test_every_instant_since_the_last_read_is_delivered_in_order() -> None:
     assert all(s.accel_m_s2[2] == pytest.approx(9.81, abs=0.1) for s in delivered)
 
 
+class _SlowBus:
+    """The emulated bus with transfers that take ``transfer_s`` of the virtual clock: the
+    chip answers at the end of each (a 400 kHz bus; or the simulated rig at x25, where
+    0.2 ms of the host's time is 5 ms of the chip's)."""
+
+    def __init__(self, bus: Icm20948BusEmulator, clock: VirtualClock, transfer_s: float) -> None:
+        self._bus, self._clock, self.transfer_s = bus, clock, transfer_s
+
+    def __getattr__(self, name: str) -> object:
+        attribute = getattr(self._bus, name)
+        if not callable(attribute):
+            return attribute
+
+        def transfer(*args: object, **kwargs: object) -> object:
+            self._clock.now_s += self.transfer_s
+            return attribute(*args, **kwargs)
+        return transfer
+
+
+@pytest.mark.parametrize("transfer_periods", [0.0, 0.3, 0.6, 0.9])
+def test_stamps_hold_when_the_chip_samples_during_the_read(transfer_periods: float) -> None:
+    """The chip goes on sampling while the host reads the status and the count: a stamp
+    taken before those transfers put the newest records after the host's time."""
+    emulator, clock, _ = rig()
+    bus = _SlowBus(emulator, clock, 0.0)
+    imu = Icm20948(bus, 0x69, clock=clock, sleep=clock.sleep)
+    imu.initialize()
+    imu.enable_fifo()
+    period = imu.sample_period_s
+    bus.transfer_s = transfer_periods * period
+    delivered = []
+    for wait in (0.0331, 0.05, 0.0079, 0.0512, 0.031, 0.02, 0.0605):
+        clock.sleep(wait)
+        read = imu.read_fifo()
+        assert not read.overflowed
+        delivered.extend(read.samples)
+    stamps = np.array([s.t_s for s in delivered])
+    grid = emulator.chips[0x69].gyro_grid
+    true_instants = grid.origin_s + (grid.index - np.arange(len(stamps))[::-1]) * period
+    assert np.all(np.diff(stamps) > 0)
+    assert np.max(np.abs(stamps - true_instants)) <= period / 2 + 1e-9
+
+
 def test_each_record_is_sampled_at_its_own_instant() -> None:
     # A 2 Hz swing read every 0.15 s: if the emulator sampled at the read, the gyro would
     # be the same across a batch; it must follow the plant's rate sample by sample.
