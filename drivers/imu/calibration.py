@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -73,11 +74,24 @@ class ImuCalibration:
 
     def correct_gyro(self, gyro_rad_s: Sequence[float]) -> np.ndarray:
         """Bias-corrected angular rate (rad/s)."""
-        return np.asarray(gyro_rad_s, dtype=float) - np.asarray(self.gyro_bias_rad_s)
+        return np.asarray(gyro_rad_s, dtype=float) - self._gyro_bias
 
     def correct_mag(self, mag_ut: Sequence[float]) -> np.ndarray:
         """Hard- and soft-iron corrected field (uT)."""
-        return np.asarray(self.mag_soft_iron) @ (np.asarray(mag_ut, dtype=float) - np.asarray(self.mag_hard_iron_ut))
+        return self._soft_iron @ (np.asarray(mag_ut, dtype=float) - self._hard_iron)
+
+    # The fields as arrays, made once: every sample of a 100 Hz stream is corrected.
+    @cached_property
+    def _gyro_bias(self) -> np.ndarray:
+        return np.asarray(self.gyro_bias_rad_s, dtype=float)
+
+    @cached_property
+    def _hard_iron(self) -> np.ndarray:
+        return np.asarray(self.mag_hard_iron_ut, dtype=float)
+
+    @cached_property
+    def _soft_iron(self) -> np.ndarray:
+        return np.asarray(self.mag_soft_iron, dtype=float)
 
     def apply(self, raw: RawImuSample, t_s: float) -> ImuSample:
         """The calibrated sample of a raw one, stamped with host time t_s (s)."""

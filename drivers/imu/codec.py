@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass
+from functools import cached_property
 
 from drivers.imu import registers as reg
 from drivers.imu.errors import ImuProtocolError
@@ -71,11 +72,12 @@ class ImuRanges:
         """GYRO_FS_SEL field value (GYRO_CONFIG_1 bits 2:1)."""
         return next(k for k, (fs, _) in reg.GYRO_FULL_SCALES.items() if fs == self.gyro_full_scale_dps)
 
-    @property
+    # Cached: every decoded sample asks for both (the field values never change).
+    @cached_property
     def accel_m_s2_per_lsb(self) -> float:
         return reg.STANDARD_GRAVITY_M_S2 / reg.ACCEL_FULL_SCALES[self.accel_fs_sel][1]
 
-    @property
+    @cached_property
     def gyro_rad_s_per_lsb(self) -> float:
         return reg.DEG_TO_RAD / reg.GYRO_FULL_SCALES[self.gyro_fs_sel][1]
 
