@@ -376,7 +376,8 @@ class Icm20948:
         chip goes on sampling while the host reads INT_STATUS_2, and a record newer than
         the host's time was stamped up to a transfer too early; at the simulated rig's
         x25 that was half a period, and 0.7 % of the samples found no partner on the
-        other chip). The first read after a reset stamps it half a period before; later reads continue the previous stamps one period apart while
+        other chip). The first read after a reset stamps it half a period before;
+        later reads continue the previous stamps one period apart while
         they stay in that window (so host jitter does not reach them) and move them to
         its nearer edge when they leave it, which only shrinks their error (at most half
         a period) and follows a chip clock that drifts from the host's.
