@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from hydrojet_bench.models import CosseratModel, PrbModel
+from hydrojet_bench.effects.setup import BaseSensorMounting
+from hydrojet_bench.models import CosseratModel, PrbModel, Solution
 from hydrojet_bench.params import DISTURBANCE_NAMES, ModelParameters, with_parameters
 from hydrojet_bench.sensitivity import sensitivity
 
@@ -55,6 +58,20 @@ def test_a_tip_moment_about_x_turns_the_tip_about_x_first():
     compliance = np.trapezoid(1.0 / (rod.youngs_modulus_pa(s) * rod.second_moment_m4), s)
     np.testing.assert_allclose(S.rotation_rows[:, 0], [compliance, 0.0, 0.0], rtol=1e-5,
                                atol=1e-9 * compliance)
+
+
+@pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=["cosserat", "prb"])
+def test_the_seed_is_the_nominal_shape_with_a_better_jacobian(model_type):
+    # A base sensor off the rod axis: its offset is part of what the solution says, and the
+    # seed once came back without it (tip sensor positions then read from the clamp).
+    model = model_type(effects=("gravity", BaseSensorMounting((0.014, 0.0, 0.0))))
+    nominal = model.solve(JETS, PARAMS)
+    seed = sensitivity(model, JETS, PARAMS, ("wd_mx",), nominal=nominal).nominal
+    for field in dataclasses.fields(Solution):
+        if field.name != "jacobian":
+            np.testing.assert_array_equal(getattr(seed, field.name), getattr(nominal, field.name), err_msg=field.name)
+    np.testing.assert_array_equal(seed.tip_sensor_position_in_base_sensor_m(np.zeros(3)),
+                                  nominal.tip_sensor_position_in_base_sensor_m(np.zeros(3)))
 
 
 def test_unknown_parameter_is_reported():

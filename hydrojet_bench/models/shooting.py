@@ -110,7 +110,8 @@ class Solution:
         than a warm solve)."""
         return Solution(self.model, self.jet_forces_n, self.arc_length_m, self.positions_in_base_m,
                         self.rotations_in_base, self.base_wrench_in_base, self.base_rotation_vector_rad,
-                        self.base_sensor_mounting, self.tip_sensor_mounting, self.iterations, self.residual, jacobian)
+                        self.base_sensor_mounting, self.tip_sensor_mounting, self.iterations, self.residual, jacobian,
+                        self.base_sensor_offset_m)
 
     def tip_sensor_position_in_base_sensor_m(self, offset_in_tip_m: np.ndarray) -> np.ndarray:
         """Where a tip sensor at ``offset_in_tip_m`` (tip frame, m) is read in the base
