@@ -8,6 +8,8 @@ Every function takes and returns a single quaternion (shape (4,)) or matrix (3, 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -18,22 +20,32 @@ FloatArray = NDArray[np.float64]
 _SMALL_ANGLE_RAD = 1e-6
 
 
+def _four(quaternion: ArrayLike) -> list[float]:
+    return np.asarray(quaternion, dtype=float).tolist()
+
+
 def quat_normalize(quaternion: ArrayLike) -> FloatArray:
     """Unit quaternion with a non-negative scalar part (one representative of +-q)."""
-    q = np.asarray(quaternion, dtype=float)
-    q = q / np.linalg.norm(q)
-    return -q if q[0] < 0.0 else q
+    w, x, y, z = _four(quaternion)
+    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    if norm == 0.0:
+        raise ValueError("a zero quaternion has no rotation to normalise")
+    scale = 1.0 / norm
+    if w < 0.0:
+        scale = -scale
+    return np.array([w * scale, x * scale, y * scale, z * scale])
 
 
 def quat_conjugate(quaternion: ArrayLike) -> FloatArray:
     """Conjugate: the inverse rotation of a unit quaternion."""
-    return np.asarray(quaternion, dtype=float) * np.array([1.0, -1.0, -1.0, -1.0])
+    w, x, y, z = _four(quaternion)
+    return np.array([w, -x, -y, -z])
 
 
 def quat_multiply(left: ArrayLike, right: ArrayLike) -> FloatArray:
     """Hamilton product ``left * right``: apply ``right`` first, then ``left``."""
-    aw, ax, ay, az = np.asarray(left, dtype=float)
-    bw, bx, by, bz = np.asarray(right, dtype=float)
+    aw, ax, ay, az = _four(left)
+    bw, bx, by, bz = _four(right)
     return np.array(
         [
             aw * bw - ax * bx - ay * by - az * bz,
@@ -46,10 +58,10 @@ def quat_multiply(left: ArrayLike, right: ArrayLike) -> FloatArray:
 
 def quat_from_rotvec(rotation_vector: ArrayLike) -> FloatArray:
     """Unit quaternion of an axis-angle vector (axis times angle in rad)."""
-    w = np.asarray(rotation_vector, dtype=float)
-    theta = float(np.linalg.norm(w))
-    scale = 0.5 - theta**2 / 48.0 if theta < _SMALL_ANGLE_RAD else np.sin(0.5 * theta) / theta
-    return np.concatenate([[np.cos(0.5 * theta)], scale * w])
+    x, y, z = np.asarray(rotation_vector, dtype=float).tolist()
+    theta = math.sqrt(x * x + y * y + z * z)
+    scale = 0.5 - theta**2 / 48.0 if theta < _SMALL_ANGLE_RAD else math.sin(0.5 * theta) / theta
+    return np.array([math.cos(0.5 * theta), scale * x, scale * y, scale * z])
 
 
 def matrix_from_quat(quaternion: ArrayLike) -> FloatArray:
