@@ -1,4 +1,4 @@
-"""One sensor's pose on the twin's settling law at one instant, compiled.
+"""One sensor's state on the twin's settling law at one instant, compiled.
 
 The emulated IMUs ask the twin for the truth at every sample of every chip (thousands
 of times per wall second on a fast simulated rig); the vectorised path over stacks of
@@ -17,24 +17,30 @@ from numba import njit
 from ..geometry import _SMALL_ANGLE_RAD
 
 
-# Compiled eagerly for any array layout (the segments' arrays are views of differing
+# Compiled eagerly for any array layout (the segments' arrays may be views of differing
 # layouts): a new layout met during a session would otherwise be compiled then, holding
 # the GIL for a second while the valve heartbeat waits.
-@njit("Tuple((float64[::1], float64[::1]))(float64[:], float64[:], float64[:], float64[:], float64)", cache=True)
-def settling_pose(target_orientation: np.ndarray, rotation_offset_rad: np.ndarray, target_position_m: np.ndarray,
-                  position_offset_m: np.ndarray, decay: float) -> tuple[np.ndarray, np.ndarray]:
-    """(4,) orientation and (3,) position (m) of one sensor at settling factor ``decay``
-    (1 at the command, 0 settled); offsets as in the twin's segments (sensor frame, rad; m)."""
-    rx = decay * rotation_offset_rad[0]
-    ry = decay * rotation_offset_rad[1]
-    rz = decay * rotation_offset_rad[2]
+@njit("Tuple((float64[::1], float64[::1], float64[::1], float64[::1]))(float64[:, :], float64[:, :], "
+      "float64[:, :], float64[:, :], int64, float64, float64)", cache=True)
+def settling_state(target_orientation: np.ndarray, rotation_offset_rad: np.ndarray, target_position_m: np.ndarray,
+                   position_offset_m: np.ndarray, sensor: int, decay: float,
+                   time_constant_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Sensor ``sensor``'s (row of the segment's (2, .) arrays) orientation (4,),
+    position (3,) (m), angular velocity (3,) (rad/s, sensor frame) and linear
+    acceleration (3,) (m/s^2, tracker frame) at settling factor ``decay`` (1 at the
+    command, 0 settled) of first-order settling with ``time_constant_s`` (0: it jumps,
+    and is never seen moving). Offsets as in the twin's segments (sensor frame, rad; m)."""
+    rx = decay * rotation_offset_rad[sensor, 0]
+    ry = decay * rotation_offset_rad[sensor, 1]
+    rz = decay * rotation_offset_rad[sensor, 2]
     theta = math.sqrt(rx * rx + ry * ry + rz * rz)
     if theta < _SMALL_ANGLE_RAD:
         scale = 0.5 - theta * theta / 48.0
     else:
         scale = math.sin(0.5 * theta) / theta
     bw, bx, by, bz = math.cos(0.5 * theta), scale * rx, scale * ry, scale * rz
-    aw, ax, ay, az = target_orientation[0], target_orientation[1], target_orientation[2], target_orientation[3]
+    aw, ax = target_orientation[sensor, 0], target_orientation[sensor, 1]
+    ay, az = target_orientation[sensor, 2], target_orientation[sensor, 3]
     q = np.empty(4)
     q[0] = aw * bw - ax * bx - ay * by - az * bz
     q[1] = aw * bx + ax * bw + ay * bz - az * by
@@ -44,6 +50,13 @@ def settling_pose(target_orientation: np.ndarray, rotation_offset_rad: np.ndarra
     sign = -1.0 if q[0] < 0.0 else 1.0
     q *= sign / norm
     p = np.empty(3)
+    omega = np.empty(3)
+    acceleration = np.empty(3)
+    # decay = exp(-t / tau): its rate is -decay / tau, its second derivative decay / tau^2.
+    rate = -decay / time_constant_s if time_constant_s > 0.0 else 0.0
+    curvature = decay / time_constant_s**2 if time_constant_s > 0.0 else 0.0
     for axis in range(3):
-        p[axis] = target_position_m[axis] + decay * position_offset_m[axis]
-    return q, p
+        p[axis] = target_position_m[sensor, axis] + decay * position_offset_m[sensor, axis]
+        omega[axis] = rate * rotation_offset_rad[sensor, axis]
+        acceleration[axis] = curvature * position_offset_m[sensor, axis]
+    return q, p, omega, acceleration

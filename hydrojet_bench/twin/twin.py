@@ -57,7 +57,7 @@ from ..params import JET_COUNT, ModelParameters, with_parameters
 from ..plans import Plan, PlanStep
 from .config import TwinConfig
 from .recording import TwinRecording
-from .settling import settling_pose
+from .settling import settling_state
 
 SENSORS = ("base", "tip")
 SENSOR_CHOICES = ("em", "imu", "truth")
@@ -262,14 +262,9 @@ class DigitalTwin:
         with self._lock:
             segment = self._segment_at(t)
         decay = math.exp(-max(t - segment.start_s, 0.0) / self._tau_s) if self._tau_s > 0.0 else 0.0
-        orientation, position = settling_pose(segment.target_orientation[index], segment.rotation_offset_rad[index],
-                                              segment.target_position_m[index], segment.position_offset_m[index],
-                                              decay)
-        if self._tau_s > 0.0:
-            angular_velocity = -decay / self._tau_s * segment.rotation_offset_rad[index]
-            acceleration = decay / self._tau_s**2 * segment.position_offset_m[index]
-        else:
-            angular_velocity = acceleration = np.zeros(3)
+        orientation, position, angular_velocity, acceleration = settling_state(
+            segment.target_orientation, segment.rotation_offset_rad, segment.target_position_m,
+            segment.position_offset_m, index, decay, self._tau_s)
         return SensorTruth(orientation, position, angular_velocity, acceleration)
 
     # --- measurements ---------------------------------------------------------------
