@@ -312,6 +312,9 @@ class _EmulatedIcm20948:
         self.model = model
         self.mounting = mounting
         self.rng = np.random.default_rng([seed, address])
+        # The magnetometer's own: it is read on the auxiliary master's clock, which the
+        # emulator runs whenever it is looked at, so its draws must not shift the motion's.
+        self.mag_rng = np.random.default_rng([seed, address, 0x0C])
         self.bias_drift_rad_s = np.zeros(3)
         self._accel_gain = 1.0 + np.asarray(model.accel_scale_error, dtype=float)
         self._gyro_gain = 1.0 + np.asarray(model.gyro_scale_error, dtype=float)
@@ -415,7 +418,7 @@ class _EmulatedIcm20948:
 
     def _measure_mag(self, t: float) -> tuple[tuple[int, int, int], bool]:
         counts = _mag_counts(self.truth(t).field_ut, self._soft_iron, self._hard_iron_ut,
-                             self.rng.normal(0.0, self.model.mag_noise_ut, 3), self._die_signs)
+                             self.mag_rng.normal(0.0, self.model.mag_noise_ut, 3), self._die_signs)
         return (int(counts[0]), int(counts[1]), int(counts[2])), bool(counts[3])
 
     def _sample_motion(self, accel_due: tuple[float, int] | None, gyro_due: tuple[float, int] | None) -> None:
@@ -749,6 +752,16 @@ class Icm20948BusEmulator:
     def attach(self, address: int) -> None:
         with self._lock:
             self._detached.discard(address)
+
+    def run_chips(self) -> None:
+        """Bring every chip up to ``clock()`` now, as silicon samples between transactions
+        too. A later read finds the same bytes whenever this is called (the FIFO tests
+        check it); called often (`bench.simulated_rig` does, beside a session), it does
+        the sampling work in small slices instead of all at the read."""
+        with self._lock:
+            now = self.clock()
+            for chip in self.chips.values():
+                chip.tick(now)
 
     # --- bus plumbing -----------------------------------------------------------------
 
