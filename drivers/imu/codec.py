@@ -111,7 +111,8 @@ class RawImuSample:
             value = getattr(self, name)
             if value is None and name == "mag_ut":
                 continue
-            if len(value) != 3 or not all(math.isfinite(v) for v in value):
+            if len(value) != 3 or not (math.isfinite(value[0]) and math.isfinite(value[1])
+                                       and math.isfinite(value[2])):
                 raise ValueError(f"{name} must be three finite numbers, got {value!r}")
         if not math.isfinite(self.temperature_degc):
             raise ValueError(f"temperature_degc must be finite, got {self.temperature_degc!r}")
