@@ -540,7 +540,6 @@ class Session:
             status.step_index, status.step = index, step
             self.em.begin(step)
             self.imu.begin(step)
-            await asyncio.sleep(0)
             started = self.clock.now()
             await self._command(valves, step.jet_forces_n)
             _raise_if_cancel_was_swallowed()
@@ -554,10 +553,6 @@ class Session:
                 await self._to_estimate.join()  # the plan is over: show its last step's errors
             self._log_step_rates()
             self.on_update(status)
-            # Between steps the plan does a few milliseconds of work (the settled row, the
-            # next command, the twin's new equilibrium on the simulated rig): in turns, so
-            # no tracker poll waits for all of it (a frame lasts 1 ms of wall time at 25x).
-            await asyncio.sleep(0)
         await self._finish_calibration()
         await self._to_estimate.join()
         _raise_if_cancel_was_swallowed()
@@ -626,7 +621,6 @@ class Session:
         if settled is None:
             self.event("warning", "plan", f"step {index}: no EM sample in its last {window_s:g} s; not estimated")
             return
-        await asyncio.sleep(0)
         self.settled_rows.append(settled)
         positions = settled.tip_position_in_base_m()
         self._log.write(Step(
