@@ -113,6 +113,7 @@ async def _chips_running(bus: Icm20948BusEmulator, clock: Clock) -> AsyncIterato
 
     async def run() -> None:
         while True:
+            # Read each time: the host sets the output rate after the bus exists.
             periods = [chip.period_s for chip in bus.chips.values()]
             await clock.sleep(_CHIP_RUN_PERIODS * min(periods, default=0.01))
             bus.run_chips()
