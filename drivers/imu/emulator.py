@@ -755,8 +755,10 @@ class Icm20948BusEmulator:
 
     def run_chips(self) -> None:
         """Bring every chip up to ``clock()`` now, as silicon samples between transactions
-        too. A later read finds the same bytes whenever this is called (the FIFO tests
-        check it); called often (`bench.simulated_rig` does, beside a session), it does
+        too. A later read finds the same samples whenever this is called (the FIFO tests
+        check it), until a FIFO overflows: instants a full FIFO drops are not sampled, so
+        the noise draws they cost, and the noise after them, depend on when the chip was
+        looked at. Called often (`bench.simulated_rig` does, beside a session), it does
         the sampling work in small slices instead of all at the read."""
         with self._lock:
             now = self.clock()

@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from imu_test_support import VirtualClock
 from test_imu_driver_sim import WobblingPlant, rig
@@ -202,12 +202,18 @@ def test_records_written_after_a_pop_behind_a_cut_record_are_never_decoded() -> 
 @settings(max_examples=25, deadline=None)
 @given(gaps=st.lists(st.tuples(st.floats(0.0, 0.25), st.lists(st.floats(0.0, 1.0), max_size=4)),
                      min_size=1, max_size=6))
+# Found by hypothesis: the chips ran once while the FIFO overflowed, and the noise of the
+# next read differed.
+@example(gaps=[(0.25, [0.9375]), (0.125, [])])
 def test_chips_sampling_between_reads_change_nothing_a_read_finds(gaps) -> None:
     # `run_chips` (the simulated rig calls it between reads) only moves the sampling
-    # work earlier: the same reads, of a moving tip, get the same bytes and stamps, and
-    # the same overflows (waits up to 0.25 s: past the FIFO's 22 records).
+    # work earlier: the same reads, of a moving tip, get the same samples, stamps and
+    # overflows (waits up to 0.25 s: past the FIFO's 22 records). Once a FIFO has
+    # overflowed the noise may differ: instants a full FIFO drops are not sampled, so
+    # how many noise draws they cost depends on when the chip was looked at.
     lazy, lazy_clock, lazy_imu = started(WobblingPlant(start_s=100.0))
     busy, busy_clock, busy_imu = started(WobblingPlant(start_s=100.0))
+    overflowed = False
     for wait_s, run_fractions in gaps:
         done = 0.0
         for fraction in sorted(run_fractions):
@@ -219,5 +225,7 @@ def test_chips_sampling_between_reads_change_nothing_a_read_finds(gaps) -> None:
         assert busy_clock() == pytest.approx(lazy_clock(), abs=1e-12)
         expected, got = lazy_imu.read_fifo(), busy_imu.read_fifo()
         assert got.overflowed == expected.overflowed
-        assert [replace(s, t_s=0.0) for s in got.samples] == [replace(s, t_s=0.0) for s in expected.samples]
         assert [s.t_s for s in got.samples] == pytest.approx([s.t_s for s in expected.samples], abs=1e-12)
+        if not overflowed:
+            assert [replace(s, t_s=0.0) for s in got.samples] == [replace(s, t_s=0.0) for s in expected.samples]
+        overflowed = overflowed or expected.overflowed
