@@ -151,7 +151,6 @@ class AuroraEmulator(EmulatorHandler):
         self.clock = clock
         self.position_noise_mm = float(position_noise_mm)
         self.orientation_noise_deg = float(orientation_noise_deg)
-        self.seed = seed
         self.version_text = version_text
         self._lock = threading.RLock()
         self._ports = {h: _Port(h, name, np.random.default_rng([seed, h]))
