@@ -48,7 +48,9 @@ RAMP_SCHEDULES = (4, 16)
 SNAP_TURNS_DEG = (20.0, 45.0, 90.0)
 
 
-@dataclass(frozen=True)
+# Not frozen: a frozen dataclass's __init__ sets each of the 13 fields through
+# object.__setattr__, 1 us of a 15 us warm solve; slots make a plain one cost 0.25 us.
+@dataclass(slots=True)
 class Solution:
     """An equilibrium shape.
 
