@@ -9,8 +9,9 @@ Modes, as on the device: after power-up or a break the system is not initialised
 talks at 9600 baud; INIT initialises it (and un-initialises every port handle, so a new
 host session re-runs PHSR 02/PINIT/PENA); TSTART enters tracking, TSTOP leaves it.
 
-Poses: ``plant.sensor_truth(name, clock())`` plus noise from each port's own seeded
-stream, measured at a frame's first read and kept, so two reads of one frame agree.
+Poses: ``plant.sensor_truth(name, t)`` at the instant ``t`` the frame began, plus noise
+from each port's own seeded stream drawn at the frame's first read and kept: two reads
+of one frame agree, and what a frame holds does not depend on when the host read it.
 Noise levels are the Aurora's published accuracy (0.48 mm, 0.70 deg RMS), spread evenly
 over the three axes. Frame numbers count at 40 Hz on ``clock``.
 
@@ -426,8 +427,10 @@ class AuroraEmulator(EmulatorHandler):
     def frame(self, report_out_of_volume: bool = True) -> TrackingFrame:
         """The tracking frame the device would report now (all initialised handles)."""
         with self._lock:
-            t_s = self.clock()
-            frame_number = int((t_s - self._t0) * FRAME_RATE_HZ) & 0xFFFFFFFF
+            elapsed_frames = int((self.clock() - self._t0) * FRAME_RATE_HZ)
+            frame_number = elapsed_frames & 0xFFFFFFFF
+            # The instant the frame began: its pose is the same whenever the host reads it.
+            t_s = self._t0 + elapsed_frames / FRAME_RATE_HZ
             records = []
             for port in self._ports.values():
                 if not port.initialised:

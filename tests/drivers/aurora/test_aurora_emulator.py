@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from aurora_testkit import HANDLES, set_up_tracking, talk, truth_mm
+from aurora_testkit import HANDLES, POSES, set_up_tracking, talk, truth_mm
 
 from drivers.aurora.commands import Command
 from drivers.aurora.emulator import AuroraEmulator
@@ -20,6 +20,7 @@ from drivers.aurora.replies import (
     decode_reply,
 )
 from drivers.aurora.errors import AuroraProtocolError
+from drivers.plant import SensorTruth, StaticPlant
 from hydrojet_bench.geometry import rotation_angle_deg
 
 
@@ -172,6 +173,28 @@ def test_poses_follow_the_plant_exactly_without_noise(plant) -> None:
         q, p_mm = truth_mm(plant, HANDLES[record.handle])
         np.testing.assert_allclose(record.transform.quaternion, q, atol=0.6e-4)
         np.testing.assert_allclose(record.transform.translation_mm, p_mm, atol=0.006)
+
+
+class SlidingPlant(StaticPlant):
+    """Sensors sliding along x at 1 m/s: a pose says the instant it was taken."""
+
+    def sensor_truth(self, sensor: str, t_s: float) -> SensorTruth:
+        truth = super().sensor_truth(sensor, t_s)
+        return SensorTruth(truth.orientation_in_tracker, truth.position_in_tracker_m + np.array([t_s, 0.0, 0.0]))
+
+
+@pytest.mark.parametrize("read_at_fraction", [0.02, 0.5, 0.98])
+def test_a_frame_holds_the_pose_at_the_instant_it_began_whenever_it_is_read(read_at_fraction) -> None:
+    clock = FakeClock()
+    plant = SlidingPlant(POSES)
+    start_s = clock.t  # frame 0 begins at power-up
+    emu = make(plant, clock=clock, position_noise_mm=0.0, orientation_noise_deg=0.0)
+    set_up_tracking(emu)
+    clock.t = start_s + (7 + read_at_fraction) * 0.025
+    tip = talk(emu, "BX:0801").tool(0x0B)
+    assert tip.frame_number == 7
+    expected_mm = (plant.sensor_truth("tip", start_s + 7 * 0.025).position_in_tracker_m * 1000.0)
+    np.testing.assert_allclose(tip.transform.translation_mm, expected_mm, atol=1e-3)
 
 
 def test_noise_has_the_configured_rms_and_frames_count_at_40_hz(plant) -> None:
