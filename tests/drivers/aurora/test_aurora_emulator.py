@@ -193,7 +193,7 @@ def test_a_frame_holds_the_pose_at_the_instant_it_began_whenever_it_is_read(read
     clock.t = start_s + (7 + read_at_fraction) * 0.025
     tip = talk(emu, "BX:0801").tool(0x0B)
     assert tip.frame_number == 7
-    expected_mm = (plant.sensor_truth("tip", start_s + 7 * 0.025).position_in_tracker_m * 1000.0)
+    expected_mm = plant.sensor_truth("tip", start_s + 7 * 0.025).position_in_tracker_m * 1000.0
     np.testing.assert_allclose(tip.transform.translation_mm, expected_mm, atol=1e-3)
 
 
