@@ -164,6 +164,11 @@ class SessionResult:
     checks: tuple[CheckResult, ...] = ()  # the setup checks' outcomes (none when skipped)
     # What the calibration's numbers suggest about the setup (`estimation.setup_warnings`).
     calibration_warnings: tuple[str, ...] = ()
+    # When the valves were armed (None if they never were): what came before is set-up
+    # (devices opened, kernels loaded or, on a fresh checkout, compiled), during which
+    # a simulated rig's session clock runs on with nothing commanded.
+    armed_session_s: float | None = None
+    armed_wall_s: float | None = None
 
     def __repr__(self) -> str:
         # Short: Python 3.11's asyncio.run formats its main task, result included, on
@@ -208,6 +213,7 @@ class Session:
         self.checks: tuple[CheckResult, ...] = ()
         self._predicted_bending: np.ndarray | None = None
         self._heap_frozen = False  # gc.freeze() while the valves are armed
+        self._armed: tuple[float, float] | None = None  # (session time, time.monotonic()) at arming
 
     # --- public ---------------------------------------------------------------------
 
@@ -247,10 +253,12 @@ class Session:
                     raise SessionAborted(f"device failure: {cause}") from error
                 raise
         steps = Dataset.concatenate(self.settled_rows) if self.settled_rows else None
+        armed = self._armed
         return SessionResult(request.log_path, completed, len(request.plan), self.clock.now(),
                              time.monotonic() - started, self.params, self.calibration,
                              tuple(self.estimates), steps, self._overall_rates, self.checks,
-                             self.calibration_warnings)
+                             self.calibration_warnings, None if armed is None else armed[0],
+                             None if armed is None else armed[1] - started)
 
     def event(self, level: str, source: str, message: str) -> None:
         t_s = self.clock.now()
@@ -274,6 +282,7 @@ class Session:
                             before_arming=self._load_kernels, on_event=self.event) as rig, \
                 self._all_off_on_record():
             self._devices = rig.simulated
+            self._armed = (self.clock.now(), time.monotonic())
             async with asyncio.TaskGroup() as group:
                 streams = [group.create_task(self._em_stream(rig.tracker), name="em-stream"),
                            group.create_task(self._estimate_steps(), name="estimation")]

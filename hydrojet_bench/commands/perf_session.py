@@ -62,6 +62,8 @@ def session_protocol_figures(plan=None) -> dict:
         "session_s": None if result is None else result.session_time_s,
         "time_scale": settings.session.time_scale,
         "wall_s": wall_s,
+        # Of wall_s, what came before the valves were armed (devices, kernels).
+        "setup_wall_s": None if result is None else result.armed_wall_s,
         "target_wall_s": SESSION_WALL_TARGET_S,
         "imu_rate_hz": settings.imu.rate_hz,
         "imu_rate_fraction": imu_fraction,

@@ -216,6 +216,17 @@ def _printer(console: Console, clipped: frozenset[int]):
     return update
 
 
+def _timing(result) -> str:
+    """Session and wall time from the arming of the valves, then the set-up before it:
+    a first run compiles the kernels (seconds of wall time, and on a simulated rig
+    time_scale times that of session time in which nothing was commanded)."""
+    if result.armed_session_s is None:
+        return f"{result.session_time_s:.0f} s session time in {result.wall_time_s:.1f} s wall time"
+    return (f"{result.session_time_s - result.armed_session_s:.0f} s session time in "
+            f"{result.wall_time_s - result.armed_wall_s:.1f} s wall time, after {result.armed_wall_s:.1f} s of "
+            "set-up (devices, kernels)")
+
+
 def _print_outcome(console: Console, result, model_name: str, args: argparse.Namespace) -> None:
     from ..analysis.compare import compare_steps
     from .compare import print_tables
@@ -223,8 +234,7 @@ def _print_outcome(console: Console, result, model_name: str, args: argparse.Nam
     for check in result.checks:
         if check.status != "pass":
             console.print(f"[yellow]warning:[/] {render.plain(check.message)}")
-    console.print(f"session done: {result.completed_steps}/{result.step_count} steps, "
-                  f"{result.session_time_s:.0f} s session time in {result.wall_time_s:.1f} s wall time")
+    console.print(f"session done: {result.completed_steps}/{result.step_count} steps, {_timing(result)}")
     if result.calibration is not None:
         console.print(f"calibration on the calibration poses: RMS {result.calibration.rms_orientation_deg_before:.2f} deg "
                       f"-> {result.calibration.rms_orientation_deg_after:.2f} deg")

@@ -78,6 +78,15 @@ def test_session_plays_every_step_and_calibrates(finished_session):
     assert np.sqrt(np.mean(online**2)) < 0.6
 
 
+def test_the_result_tells_the_set_up_from_the_plan(finished_session):
+    session, result = finished_session
+    # Set-up (devices, kernels) ends when the valves are armed; every step comes after.
+    assert 0.0 < result.armed_session_s < result.steps.time_s.min()
+    assert 0.0 < result.armed_wall_s < result.wall_time_s
+    plan_s = sum(step.settle_s for step in session.request.plan)
+    assert plan_s <= result.session_time_s - result.armed_session_s
+
+
 def test_valves_are_closed_when_the_session_ends(finished_session):
     session, _ = finished_session
     assert session._devices.valve_emulator.duties_permille == (0, 0, 0)
