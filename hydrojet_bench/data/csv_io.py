@@ -94,6 +94,22 @@ def _is_comment(line: str) -> bool:
     return "#" in line and line.lstrip().startswith("#")
 
 
+_PROFILE_COMMENT = "# rig profile: "
+
+
+def recorded_profile_name(path: str | Path) -> str | None:
+    """The name of the rig profile `write_csv` noted in the table's comments (its first
+    word), or None when the table has no such comment (a table from elsewhere)."""
+    with Path(path).open(encoding="utf-8-sig", errors="replace") as handle:
+        for line in handle:
+            if not _is_comment(line):
+                return None
+            if line.startswith(_PROFILE_COMMENT):
+                words = line[len(_PROFILE_COMMENT):].split()
+                return words[0] if words else None
+    return None
+
+
 def _parse_header(fields: list[str], where: str) -> list[str]:
     names = [name.strip() for name in fields]
     seen: set[str] = set()
@@ -448,7 +464,7 @@ def write_csv(dataset: Dataset, path: str | Path, *, drop_flagged: bool = False)
     profile_name = dataset.profile.name + (f" ({dataset.profile.path})" if dataset.profile.path else "")
     with Path(path).open("w", encoding="utf-8", newline="") as handle:
         handle.write("# HydroJet Bench measurement table (contract: hydrojet_bench/data/csv_io.py)\n")
-        handle.write(f"# source: {source}\n# rig profile: {' '.join(profile_name.split())}\n")
+        handle.write(f"# source: {source}\n{_PROFILE_COMMENT}{' '.join(profile_name.split())}\n")
         handle.write(",".join(columns + list(LABEL_COLUMNS)) + "\n")
         # repr gives the shortest string that reads back to the same float.
         handle.writelines(",".join(map(repr, values)) + f",{sweep},{step}\n"

@@ -223,6 +223,7 @@ def test_write_then_read_gives_the_same_dataset(original: Dataset) -> None:
         path = Path(folder) / "round.csv"
         assert write_csv(original, path) == len(original)
         again = read_csv(path, PROFILE)
+        assert csv_io.recorded_profile_name(path) == PROFILE.name
     for name in ("time_s", "jet_forces_n", "base_orientation", "tip_orientation", "base_position_m",
                  "tip_position_m", "sweep", "step", "flags"):
         expected, actual = getattr(original, name), getattr(again, name)
@@ -286,3 +287,17 @@ def test_steps_read_block_by_block_are_the_steps_of_the_whole_file(original: Dat
         else:
             np.testing.assert_array_equal(actual, expected, err_msg=name)
     np.testing.assert_array_equal(blocks.step, rows.step)
+
+
+@pytest.mark.parametrize("text, name", [
+    ("# made by hand\n# rig profile: horiz (/rigs/horiz.toml)\nt,q1\n", "horiz"),
+    ("\ufeff# rig profile: sim\nt,q1\n", "sim"),
+    ("# rig profile: \nt,q1\n", None),
+    ("t,q1\n# rig profile: late\n", None),  # not a comment of the table's head
+    ("# another tool's table\nt,q1\n", None),
+    ("", None),
+])
+def test_the_profile_a_table_was_written_with_is_read_from_its_head(tmp_path: Path, text: str, name) -> None:
+    path = tmp_path / "t.csv"
+    path.write_text(text, encoding="utf-8")
+    assert csv_io.recorded_profile_name(path) == name
