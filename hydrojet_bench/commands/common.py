@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..errors import UserError
 from .. import inputs
-from ..data.csv_io import recorded_profile_name
+from ..data.csv_io import recorded_profile, recorded_with
 from ..data.dataset import Dataset
 from ..models import MODELS
 from ..profile import RigProfile
@@ -61,10 +61,10 @@ def load_steps(path: Path, profile: str | None) -> tuple[RigProfile, Dataset]:
 def _warn_if_recorded_elsewhere(path: Path, profile: RigProfile) -> None:
     """A CSV table's comments name the profile it was written with (`write_csv`); read
     with the default one instead, gravity, mountings and rod may all be another rig's."""
-    recorded = recorded_profile_name(path)
-    if recorded is not None and recorded != profile.name:
+    recorded = recorded_profile(path)
+    if recorded is not None and not recorded_with(recorded, profile):
         render.console(stderr=True).print(
-            f"warning: {path} was recorded with rig profile {recorded!r} (its comments say so) and is read "
+            f"warning: {path} was recorded with rig profile {recorded} (its comments say so) and is read "
             f"with {profile.name!r}, the default for a CSV table: give --profile", style="yellow", markup=False,
             highlight=False, soft_wrap=True)
 

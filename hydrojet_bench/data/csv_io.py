@@ -97,17 +97,24 @@ def _is_comment(line: str) -> bool:
 _PROFILE_COMMENT = "# rig profile: "
 
 
-def recorded_profile_name(path: str | Path) -> str | None:
-    """The name of the rig profile `write_csv` noted in the table's comments (its first
-    word), or None when the table has no such comment (a table from elsewhere)."""
+def recorded_profile(path: str | Path) -> str | None:
+    """The rig profile `write_csv` noted in the table's comments: its name, then its file
+    in parentheses if it had one (``"horiz (/rigs/horiz.toml)"``); None when the table
+    has no such comment (a table from elsewhere)."""
     with Path(path).open(encoding="utf-8-sig", errors="replace") as handle:
         for line in handle:
             if not _is_comment(line):
                 return None
             if line.startswith(_PROFILE_COMMENT):
-                words = line[len(_PROFILE_COMMENT):].split()
-                return words[0] if words else None
+                return line[len(_PROFILE_COMMENT):].strip() or None
     return None
+
+
+def recorded_with(recorded: str, profile: RigProfile) -> bool:
+    """Whether `recorded_profile`'s text names ``profile`` (by name: its file may sit
+    elsewhere on another machine)."""
+    name = " ".join(profile.name.split())
+    return recorded == name or recorded.startswith(f"{name} (")
 
 
 def _parse_header(fields: list[str], where: str) -> list[str]:

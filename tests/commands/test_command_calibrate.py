@@ -70,12 +70,12 @@ def test_fit_on_chooses_the_rows(hysteretic, tmp_path, capsys, fit_on, said, pos
 def test_a_table_recorded_with_another_profile_is_read_with_the_default_and_a_warning(hysteretic, tmp_path,
                                                                                        capsys):
     elsewhere = tmp_path / "elsewhere.csv"
-    elsewhere.write_text(hysteretic.read_text().replace("# rig profile: sim", "# rig profile: horiz", 1))
+    elsewhere.write_text(hysteretic.read_text().replace("# rig profile: sim (", "# rig profile: horiz (", 1))
     for table, warned in ((hysteretic, False), (elsewhere, True)):
         assert main(["calibrate", str(table), "-o", str(tmp_path / f"{table.stem}.toml")]) == 0
         err = " ".join(capsys.readouterr().err.split())
-        warning = (f"warning: {table} was recorded with rig profile 'horiz' (its comments say so) and is read "
-                   "with 'sim', the default for a CSV table: give --profile")
+        warning = (f"warning: {table} was recorded with rig profile horiz ({load_profile('sim').path}) (its "
+                   "comments say so) and is read with 'sim', the default for a CSV table: give --profile")
         assert (warning in err) == warned, err
     assert main(["calibrate", str(elsewhere), "--profile", "sim", "-o", str(tmp_path / "chosen.toml")]) == 0
     assert "recorded with rig profile" not in capsys.readouterr().err

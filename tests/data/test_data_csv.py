@@ -223,7 +223,7 @@ def test_write_then_read_gives_the_same_dataset(original: Dataset) -> None:
         path = Path(folder) / "round.csv"
         assert write_csv(original, path) == len(original)
         again = read_csv(path, PROFILE)
-        assert csv_io.recorded_profile_name(path) == PROFILE.name
+        assert csv_io.recorded_with(csv_io.recorded_profile(path), PROFILE)
     for name in ("time_s", "jet_forces_n", "base_orientation", "tip_orientation", "base_position_m",
                  "tip_position_m", "sweep", "step", "flags"):
         expected, actual = getattr(original, name), getattr(again, name)
@@ -289,15 +289,23 @@ def test_steps_read_block_by_block_are_the_steps_of_the_whole_file(original: Dat
     np.testing.assert_array_equal(blocks.step, rows.step)
 
 
-@pytest.mark.parametrize("text, name", [
-    ("# made by hand\n# rig profile: horiz (/rigs/horiz.toml)\nt,q1\n", "horiz"),
+@pytest.mark.parametrize("text, recorded", [
+    ("# made by hand\n# rig profile: horiz (/rigs/horiz.toml)\nt,q1\n", "horiz (/rigs/horiz.toml)"),
     ("\ufeff# rig profile: sim\nt,q1\n", "sim"),
     ("# rig profile: \nt,q1\n", None),
     ("t,q1\n# rig profile: late\n", None),  # not a comment of the table's head
     ("# another tool's table\nt,q1\n", None),
     ("", None),
 ])
-def test_the_profile_a_table_was_written_with_is_read_from_its_head(tmp_path: Path, text: str, name) -> None:
+def test_the_profile_a_table_was_written_with_is_read_from_its_head(tmp_path: Path, text: str, recorded) -> None:
     path = tmp_path / "t.csv"
     path.write_text(text, encoding="utf-8")
-    assert csv_io.recorded_profile_name(path) == name
+    assert csv_io.recorded_profile(path) == recorded
+
+
+def test_a_profile_is_recognised_by_its_name_wherever_its_file_is() -> None:
+    named = profile_from_mapping({"name": "bench  two", "gravity": {"in_tracker_m_s2": [0.0, 0.0, -9.81]}})
+    assert csv_io.recorded_with("bench two (/elsewhere/bench.toml)", named)  # as write_csv spaces it
+    assert csv_io.recorded_with("bench two", named)
+    assert not csv_io.recorded_with("bench two2 (/x.toml)", named)
+    assert not csv_io.recorded_with("bench", named)
