@@ -27,7 +27,7 @@ from ..params_io import calibration_parameter_file, effect_specs, write_paramete
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
 from .next_steps import command, input_words, print_next
-from .log_notice import warn_if_incomplete
+from .log_notice import warn_if_incomplete, warn_if_recorded_elsewhere
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -53,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
     model = choice.model
     profile, steps = load_steps(args.input, args.profile)
     warn_if_incomplete(args.input)
+    profile_mismatch = warn_if_recorded_elsewhere(args.input, args.profile, profile)
     fit_on = args.fit_on or rows_that_identify(choice.requested)
     rows = fit_mask(steps, fit_on)
     if not rows.any():
@@ -89,8 +90,8 @@ def run(args: argparse.Namespace) -> int:
         # should not carry it in memory.
         from ..api import CalibrateResult
 
-        render.write_json(args.json, CalibrateResult(model, choice.effect_specs, steps.select(rows), result,
-                                                     content).as_dict())
+        render.write_json(args.json, {**CalibrateResult(model, choice.effect_specs, steps.select(rows), result,
+                                                        content).as_dict(), "profile_mismatch": profile_mismatch})
     compare = command("compare", *input_words(args), "--params", args.output, "--online")
     print_next(console, "see how it predicts the sweeps with", [compare])
     return 0

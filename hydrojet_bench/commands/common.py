@@ -8,11 +8,9 @@ from pathlib import Path
 
 from ..errors import UserError
 from .. import inputs
-from ..data.csv_io import recorded_profile, recorded_with
 from ..data.dataset import Dataset
 from ..models import MODELS
 from ..profile import RigProfile
-from . import render
 
 ANY_INPUT = "a CSV file (see hydrojet_bench/data/csv_io.py) or a session log (.mcap)"
 SESSION_LOG = "a session log (.mcap) from `hydrojet-bench run`"
@@ -49,24 +47,10 @@ def check_seed(seed: int | None) -> None:
 def load_steps(path: Path, profile: str | None) -> tuple[RigProfile, Dataset]:
     """The profile and the data reduced to one row per quasistatic step. Without a
     profile, a session log brings its own and a CSV file gets "sim"."""
-    default_for_csv = profile is None and Path(path).suffix.lower() != ".mcap"
-    if default_for_csv:
+    if profile is None and Path(path).suffix.lower() != ".mcap":
         profile = "sim"
     steps = inputs.load_steps(path, profile)
-    if default_for_csv:
-        _warn_if_recorded_elsewhere(path, steps.profile)
     return steps.profile, steps
-
-
-def _warn_if_recorded_elsewhere(path: Path, profile: RigProfile) -> None:
-    """A CSV table's comments name the profile it was written with (`write_csv`); read
-    with the default one instead, gravity, mountings and rod may all be another rig's."""
-    recorded = recorded_profile(path)
-    if recorded is not None and not recorded_with(recorded, profile):
-        render.console(stderr=True).print(
-            f"warning: {path} was recorded with rig profile {recorded} (its comments say so) and is read "
-            f"with {profile.name!r}, the default for a CSV table: give --profile", style="yellow", markup=False,
-            highlight=False, soft_wrap=True)
 
 
 def comparison_steps(path: Path, profile: str | None,

@@ -33,7 +33,7 @@ from ..models.shooting import ShootingModel
 from . import render
 from .common import add_input_arguments, add_model_arguments, comparison_steps
 from .figure_options import add_format_argument
-from .log_notice import warn_if_incomplete
+from .log_notice import warn_if_incomplete, warn_if_recorded_elsewhere
 
 LABELS = {"ref": "Ref.", "online": "Proposed"}
 BREAKDOWN_KEYS = ("by_jet", "by_direction", "by_region", "loading_unloading", "over_time", "worst_poses")
@@ -84,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
     # On a session log's own settled steps, Ref. and Proposed are the live figures.
     profile, steps, validation = comparison_steps(args.input, args.profile)
     log_damage = warn_if_incomplete(args.input)
+    profile_mismatch = warn_if_recorded_elsewhere(args.input, args.profile, profile)
 
     def evaluate(choice: ModelChoice) -> Evaluation:
         params = choice.parameters(profile.model_parameters())
@@ -103,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     if before is not None:
         print_before_after(console, before, after)
     if args.json:
-        write_json(args.json, validation, after, before, log_damage, noise)
+        write_json(args.json, validation, after, before, log_damage, noise, profile_mismatch)
     if args.report:
         from ..analysis.report import write_report
 
@@ -342,9 +343,11 @@ def figures(evaluation: Evaluation, steps: Dataset) -> dict:
 
 
 def write_json(path: Path, steps: Dataset, evaluation: Evaluation, baseline: Evaluation | None = None,
-               log_damage: dict | None = None, noise: NoiseFloor | None = None) -> None:
+               log_damage: dict | None = None, noise: NoiseFloor | None = None,
+               profile_mismatch: dict | None = None) -> None:
     document = figures(evaluation, steps)
     document["log_damage"] = log_damage
+    document["profile_mismatch"] = profile_mismatch
     document["noise_floor"] = None if noise is None else noise.as_dict()
     gap = evaluation.breakdowns["ref"].loading
     document["hysteresis_gap_vs_noise"] = (None if noise is None or gap.hysteresis_gap_deg is None else

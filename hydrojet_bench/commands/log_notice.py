@@ -1,5 +1,7 @@
-"""The notice every analysis command gives about a session log that is cut or damaged:
-one warning line on standard error, and the ``log_damage`` field of its JSON document."""
+"""The notices the analysis commands give about their input, each one warning line on
+standard error and a field of their JSON documents: a session log that is cut or
+damaged (``log_damage``), and a CSV table read with the default profile although
+another one wrote it (``profile_mismatch``)."""
 
 from __future__ import annotations
 
@@ -7,7 +9,13 @@ from pathlib import Path
 
 from rich.console import Console
 
+from ..data.csv_io import recorded_profile, recorded_with
 from ..logs.condition import log_condition
+from ..profile import RigProfile
+
+
+def _warn(text: str) -> None:
+    Console(stderr=True).print(f"warning: {text}", style="yellow", markup=False, highlight=False, soft_wrap=True)
 
 
 def warn_if_incomplete(path: Path) -> dict[str, object] | None:
@@ -19,6 +27,20 @@ def warn_if_incomplete(path: Path) -> dict[str, object] | None:
     condition = log_condition(path)
     if condition.whole:
         return None
-    Console(stderr=True).print(f"warning: {condition.notice()}", style="yellow", markup=False, highlight=False,
-                               soft_wrap=True)
+    _warn(condition.notice())
     return condition.as_dict()
+
+
+def warn_if_recorded_elsewhere(path: Path, profile_given: str | None, profile: RigProfile) -> dict[str, str] | None:
+    """For a CSV table read with the default ``profile`` (no ``--profile`` given) whose
+    comments say another profile wrote it (`write_csv` notes it): gravity, mountings and
+    rod may all be another rig's. Print so and return it for the JSON document; None
+    otherwise."""
+    if profile_given is not None or Path(path).suffix.lower() == ".mcap":
+        return None
+    recorded = recorded_profile(path)
+    if recorded is None or recorded_with(recorded, profile):
+        return None
+    _warn(f"{path} was recorded with rig profile {recorded} (its comments say so) and is read with "
+          f"{profile.name!r}, the default for a CSV table: give --profile")
+    return {"recorded": recorded, "used": profile.name}

@@ -4,6 +4,8 @@ sweeps by default; `--fit-on` chooses; the command says which rows it used."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from hydrojet_bench.cli import main
@@ -71,11 +73,16 @@ def test_a_table_recorded_with_another_profile_is_read_with_the_default_and_a_wa
                                                                                        capsys):
     elsewhere = tmp_path / "elsewhere.csv"
     elsewhere.write_text(hysteretic.read_text().replace("# rig profile: sim (", "# rig profile: horiz (", 1))
+    recorded = f"horiz ({load_profile('sim').path})"
     for table, warned in ((hysteretic, False), (elsewhere, True)):
-        assert main(["calibrate", str(table), "-o", str(tmp_path / f"{table.stem}.toml")]) == 0
+        document = tmp_path / f"{table.stem}.json"
+        assert main(["calibrate", str(table), "-o", str(tmp_path / f"{table.stem}.toml"), "--json",
+                     str(document)]) == 0
         err = " ".join(capsys.readouterr().err.split())
-        warning = (f"warning: {table} was recorded with rig profile horiz ({load_profile('sim').path}) (its "
-                   "comments say so) and is read with 'sim', the default for a CSV table: give --profile")
+        warning = (f"warning: {table} was recorded with rig profile {recorded} (its comments say so) and is read "
+                   "with 'sim', the default for a CSV table: give --profile")
         assert (warning in err) == warned, err
+        mismatch = json.loads(document.read_text())["profile_mismatch"]
+        assert mismatch == ({"recorded": recorded, "used": "sim"} if warned else None)
     assert main(["calibrate", str(elsewhere), "--profile", "sim", "-o", str(tmp_path / "chosen.toml")]) == 0
     assert "recorded with rig profile" not in capsys.readouterr().err
