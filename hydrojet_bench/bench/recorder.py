@@ -8,6 +8,8 @@ a CSV file, so the live estimate and a later `compare` see the same kind of row.
 
 from __future__ import annotations
 
+import bisect
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,11 +47,15 @@ class StepRecorder:
         self.step = step
         self._samples.clear()
 
-    def add(self, t_s: float, base_orientation: np.ndarray, tip_orientation: np.ndarray,
-            base_position_m: np.ndarray | None = None, tip_position_m: np.ndarray | None = None) -> None:
+    def add(self, t_s: float, base_orientation: Sequence[float], tip_orientation: Sequence[float],
+            base_position_m: Sequence[float] | None = None, tip_position_m: Sequence[float] | None = None) -> None:
+        """One sample (session s, quaternions (w, x, y, z), positions in m), taken at or
+        after the one added before it."""
         if self.step is None:
             return  # before the first command: logged as raw data, not part of any step
         samples = self._samples
+        if samples.time_s and t_s < samples.time_s[-1]:
+            raise ValueError(f"{self.source} sample at {t_s} s added after one at {samples.time_s[-1]} s")
         samples.time_s.append(t_s)
         samples.base_orientation.append(base_orientation)
         samples.tip_orientation.append(tip_orientation)
@@ -65,19 +71,21 @@ class StepRecorder:
         """The step's settled state as a one-row `Dataset` (averaged over samples in
         [end_s - window_s, end_s]), or None when no sample fell in the window."""
         samples = self._samples
-        times = np.asarray(samples.time_s)
-        rows = np.flatnonzero((times >= end_s - window_s) & (times <= end_s))
-        if self.step is None or len(rows) == 0:
+        # Samples arrive in time order: the window is one run of them, and only its few
+        # samples (of a step's hundreds) become arrays.
+        first = bisect.bisect_left(samples.time_s, end_s - window_s)
+        last = bisect.bisect_right(samples.time_s, end_s)
+        if self.step is None or last <= first:
             return None
 
-        count = len(rows)
+        count = last - first
         window = Dataset(
-            time_s=times[rows],
+            time_s=np.asarray(samples.time_s[first:last]),
             jet_forces_n=np.tile(self.step.jet_forces_n, (count, 1)),
-            base_orientation=np.asarray(samples.base_orientation)[rows],
-            tip_orientation=np.asarray(samples.tip_orientation)[rows],
-            base_position_m=np.asarray(samples.base_position_m)[rows] if self.with_positions else None,
-            tip_position_m=np.asarray(samples.tip_position_m)[rows] if self.with_positions else None,
+            base_orientation=np.asarray(samples.base_orientation[first:last]),
+            tip_orientation=np.asarray(samples.tip_orientation[first:last]),
+            base_position_m=np.asarray(samples.base_position_m[first:last]) if self.with_positions else None,
+            tip_position_m=np.asarray(samples.tip_position_m[first:last]) if self.with_positions else None,
             sweep=np.full(count, self.step.sweep),
             step=np.full(count, self.step.step),
             profile=self.profile,
