@@ -241,7 +241,9 @@ class Session:
             "settings": repr(request.settings),
         }}
         completed = 0
-        with LogWriter(request.log_path, metadata=metadata, flush_interval_s=request.settings.session.flush_interval_s,
+        # The profile's flush period is session time, like its other times; the writer counts wall time.
+        flush_interval_wall_s = request.settings.session.flush_interval_s / self.clock.time_scale
+        with LogWriter(request.log_path, metadata=metadata, flush_interval_s=flush_interval_wall_s,
                        overwrite=request.overwrite_log, listener=self.on_log_message,
                        reorder_window_s=REORDER_WINDOW_WALL_S * self.clock.time_scale, background=True) as log:
             self._log = log

@@ -341,9 +341,11 @@ class SessionTable(Table, kw_only=True):
     window_s: Positive = 1.0          # average the last window_s of each step, session s
     # session seconds per wall second (> 1 only on the sim rig)
     time_scale: Annotated[float, msgspec.Meta(gt=0.0, le=MAX_TIME_SCALE)] = 1.0
-    # Log flush period, wall s: what a crash may lose. The session's log compresses and
-    # indexes each chunk on its writer thread, which holds the interpreter for part of it:
-    # at 0.25 s a chunk stays small enough not to stall the 100 Hz IMU drain.
+    # Log flush period, session s: what a crash may lose. The session's log compresses
+    # and indexes each chunk on its writer thread, which holds the interpreter for part
+    # of it, so a chunk must stay small in wall time too: on the simulated rig at 25x a
+    # flush every 0.25 s of wall time (6 s of session data) made the tracker miss 0.4 %
+    # more of its frames than one every 10 ms.
     flush_interval_s: Positive = 0.25
 
     def __post_init__(self) -> None:

@@ -3,8 +3,8 @@
 * `LogWriter` records typed messages, one record type per topic (`TOPICS`, in
   `hydrojet_bench.logs.topics`; `/tf` and `/scene/backbone` carry Foxglove's messages),
   as JSON with a JSON schema generated from the type, chunked and flushed every
-  ``flush_interval_s`` of wall time (a session: 0.25 s) so that a killed session loses
-  that much at most; a session's writer adds to the chunks on a thread of its own.
+  ``flush_interval_s`` of wall time (a session: 0.25 s of session time) so that a killed
+  session loses that much at most; a session's writer adds to the chunks on a thread of its own.
 * `read_log` and `read_metadata` read complete, truncated and damaged logs alike: a
   damaged chunk or an unreadable message is skipped, and `LogContents.damage` says what
   was lost; a topic none of whose messages its type can read raises `LogError` naming

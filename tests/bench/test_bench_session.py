@@ -268,6 +268,22 @@ def test_log_is_written_in_time_order(finished_session):
         assert earlier.message_end_time <= later.message_start_time
 
 
+def test_the_log_is_flushed_every_flush_interval_of_session_time(finished_session):
+    """What a kill may lose is the profile's flush interval of session time, on the
+    simulated rig as on the rig: at x10, a chunk per 25 ms of wall time, not per 0.25 s."""
+    from mcap.reader import make_reader
+
+    session, result = finished_session
+    interval_s = session.request.settings.session.flush_interval_s
+    with open(session.request.log_path, "rb") as stream:
+        chunks = make_reader(stream).get_summary().chunk_indexes
+    spans_s = [(chunk.message_end_time - chunk.message_start_time) / 1e9 for chunk in chunks[1:-1]]
+    # A chunk closes at the first write after its interval, on the writer thread's next
+    # look (every 5 ms of wall time, 50 ms of session time here).
+    assert np.median(spans_s) == pytest.approx(interval_s, abs=0.1)
+    assert len(chunks) > 0.5 * result.session_time_s / interval_s
+
+
 def test_the_sessions_own_calibration_shows_and_logs_a_setup_warning(tmp_path):
     """Jet forces in mN read as N (the twin's jets push a thousandth of the command): the
     rod hardly bends, the calibration puts its stiffness on the bound, and the session

@@ -37,8 +37,8 @@ SEED = 13
 SAMPLE_PER_COMMAND = 3
 EVERY_VARIANT = os.environ.get("HYDROJET_FUZZ_ALL") == "1"
 # Ten calibration poses and two short sweeps: enough steps for diagnose (10 training
-# steps); at x10 and a flush every 0.8 s of wall time, about ten chunks.
-FLUSH_INTERVAL_S = 0.8
+# steps); a flush every 8 s of session time, about ten chunks.
+FLUSH_INTERVAL_S = 8.0
 
 
 @dataclass(frozen=True)
