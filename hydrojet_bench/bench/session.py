@@ -98,8 +98,8 @@ async def _after_due_timers() -> None:
     """Let every task whose timer fell due go before the caller's next piece of work.
 
     At 25x a tracker frame lasts 1 ms of wall time, and a plan step's end (its settled
-    row, the next command and the twin's new equilibrium) takes about that long: done in
-    one piece it made the tracker miss a frame at most steps. ``sleep(0)`` is not enough,
+    row, the next command and the twin's new equilibrium) takes about 2 ms: done in one
+    piece it made the tracker miss a frame at most steps. ``sleep(0)`` is not enough,
     as the caller's own turn is queued ahead of the timers that fell due meanwhile; a
     timer of its own, due after theirs, is queued behind them."""
     await asyncio.sleep(1e-6)
