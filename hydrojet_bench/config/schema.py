@@ -344,7 +344,7 @@ class SessionTable(Table, kw_only=True):
     # Log flush period, session s: what a crash may lose. The session's log compresses
     # and indexes each chunk on its writer thread, which holds the interpreter for part
     # of it, so a chunk must stay small in wall time too: on the simulated rig at 25x a
-    # flush every 0.25 s of wall time (6 s of session data) left the tracker 97.4-98.1 %
+    # flush every 0.25 s of wall time (6 s of session data) left the tracker 97.3-98.1 %
     # of its frames, against 98.6-98.8 % with one every 10 ms.
     flush_interval_s: Positive = 0.25
 
