@@ -130,7 +130,8 @@ class Solution:
         return quat_from_matrix(self.tip_sensor_in_base_sensor())
 
 
-@dataclass
+# slots: a warm solve builds one per call (`with_jets`), and a slots instance costs half.
+@dataclass(slots=True)
 class PreparedProblem:
     """A `RodProblem` packed for the kernel: nondimensional arrays plus the scales
     (``wrench_scale`` turns a nondimensional force-moment pair into N and N m).
@@ -142,7 +143,9 @@ class PreparedProblem:
     profile: np.ndarray
     tip: np.ndarray
     base: np.ndarray
-    beta: float
+    # Cubic section-law coefficient (nondimensional), or None for the plain rod: linear
+    # law and no distributed moment (`kernels`).
+    beta: float | None
     length_m: float
     force_scale_n: float
     moment_scale_nm: float
@@ -277,7 +280,10 @@ class ShootingModel:
         base[kernels.BASE_PREVIOUS_ROTATION:kernels.BASE_PREVIOUS_ROTATION + 3] = problem.previous_base_rotation_vector_rad
         if not (np.all(np.isfinite(tip)) and np.all(np.isfinite(base))):
             raise ValueError("effects produced a non-finite tip load or clamp parameter")
-        return PreparedProblem(problem, profile, tip, base, problem.cubic_stiffening_m2 / length**2,
+        # None selects the kernels' plain-rod specialisation (see `kernels`).
+        plain = problem.cubic_stiffening_m2 == 0.0 and not problem.distributed_moment_in_body_nm_m.any()
+        beta = None if plain else problem.cubic_stiffening_m2 / length**2
+        return PreparedProblem(problem, profile, tip, base, beta,
                                length, force_scale, moment_scale, self.node_arc_length_m(length),
                                np.repeat([force_scale, moment_scale], 3),
                                bool(base[kernels.BASE_COMPLIANCE:kernels.BASE_COMPLIANCE + 3].any()))

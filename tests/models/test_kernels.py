@@ -68,3 +68,35 @@ def test_the_tangent_jacobian_is_the_derivative_of_the_discrete_shot(seed, beta,
                                   - _shot(-offset, anchored, profile, tip, base, beta)) / (2 * step)
     assert np.all(np.isfinite(jacobian))
     np.testing.assert_allclose(jacobian, differences, atol=1e-7 * np.abs(differences).max())
+
+
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_the_plain_rod_kernel_is_the_general_kernel_without_its_terms(seed):
+    """beta None compiles the shot without the section-law Newton solve and the
+    distributed moment: on a problem with neither it must give the general kernel's
+    residual, tangents and shape, to rounding."""
+    profile, tip, base, _, reference = _problem(seed, 0.0, 0.3, 0.0)
+    profile[:, kernels.DISTRIBUTED_MOMENT:kernels.DISTRIBUTED_MOMENT + 3] = 0.0
+    x = np.random.default_rng(seed).normal(0.0, 0.05, 3)
+    shots = {}
+    for beta in (0.0, None):
+        residual, jacobian, y = np.empty(3), np.empty((3, 3)), np.empty(18)
+        nodes_p, nodes_r = np.empty((RESOLUTION + 1, 3)), np.empty((RESOLUTION + 1, 3, 3))
+        kernels.shoot_with_jacobian(RESOLUTION, x, reference, profile, tip, base, beta, 1.0, residual, jacobian,
+                                    y, np.empty((3, 3)), nodes_p, nodes_r, True)
+        shots[beta] = (residual, jacobian, y, nodes_p, nodes_r)
+    for general, plain in zip(shots[0.0], shots[None]):
+        np.testing.assert_allclose(plain, general, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(_shot(x, reference, profile, tip, base, None), shots[0.0][0], rtol=1e-12, atol=1e-14)
+
+
+def test_a_prepared_problem_takes_the_plain_kernel_only_without_cubic_law_and_distributed_moment():
+    model = CosseratModel(resolution=RESOLUTION)
+    jets = np.array([0.05, 0.0, 0.0])
+    assert model.prepare(jets, ACROSS).beta is None
+    problem = model.build_problem(jets, ACROSS)
+    problem.distributed_moment_in_body_nm_m[:, 2] = 1e-4
+    assert model._pack(problem).beta == 0.0
+    problem = model.build_problem(jets, ACROSS)
+    problem.cubic_stiffening_m2 = 1e-6
+    assert model._pack(problem).beta == pytest.approx(1e-6 / ACROSS.rod.length_m ** 2)
