@@ -158,9 +158,9 @@ def _curvature(profile, row, load_scale, beta, mx, my, mz):
 
 @njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
 def _moment_load(profile, row, load_scale, beta):
-    """The scaled body-frame distributed moment at a sample point; zero on the plain rod."""
+    """The scaled body-frame distributed moment at a sample point; None on the plain rod."""
     if beta is None:
-        return 0.0, 0.0, 0.0
+        return None
     return (load_scale * profile[row, DISTRIBUTED_MOMENT], load_scale * profile[row, DISTRIBUTED_MOMENT + 1],
             load_scale * profile[row, DISTRIBUTED_MOMENT + 2])
 
@@ -231,12 +231,11 @@ def _tangent_rates(t, u, c, l, start, a, previous, dn, out):
     of the tangent start[:, d] + a * previous[:, d] (15 rows: dp, dR row-major, dm; one
     column per direction) at the stage state ``t`` (18-tuple), whose curvature is ``u``
     and local compliance ``c`` (`_curvature_compliance`); ``l`` the row's scaled
-    body-frame distributed moment. dn (3, D) is constant along the rod: the distributed
+    body-frame distributed moment (None on the plain rod). dn (3, D) is constant along the rod: the distributed
     force does not depend on the state. Directions are columns so the loop runs over
     contiguous memory."""
     (px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, nx, ny, nz, gx, gy, gz) = t
     ux, uy, uz = u
-    lx, ly, lz = l
     for d in range(start.shape[1]):
         d00 = start[3, d] + a * previous[3, d]
         d01 = start[4, d] + a * previous[4, d]
@@ -275,9 +274,14 @@ def _tangent_rates(t, u, c, l, start, a, previous, dn, out):
         out[10, d] = d22 * ux - d20 * uz + r22 * dux - r20 * duz
         out[11, d] = d20 * uy - d21 * ux + r20 * duy - r21 * dux
         # dm' = -(dp' x n + p' x dn) - dR l.
-        out[12, d] = -(d12 * nz - d22 * ny + r12 * dnz - r22 * dny) - (d00 * lx + d01 * ly + d02 * lz)
-        out[13, d] = -(d22 * nx - d02 * nz + r22 * dnx - r02 * dnz) - (d10 * lx + d11 * ly + d12 * lz)
-        out[14, d] = -(d02 * ny - d12 * nx + r02 * dny - r12 * dnx) - (d20 * lx + d21 * ly + d22 * lz)
+        out[12, d] = -(d12 * nz - d22 * ny + r12 * dnz - r22 * dny)
+        out[13, d] = -(d22 * nx - d02 * nz + r22 * dnx - r02 * dnz)
+        out[14, d] = -(d02 * ny - d12 * nx + r02 * dny - r12 * dnx)
+        if l is not None:
+            lx, ly, lz = l
+            out[12, d] -= d00 * lx + d01 * ly + d02 * lz
+            out[13, d] -= d10 * lx + d11 * ly + d12 * lz
+            out[14, d] -= d20 * lx + d21 * ly + d22 * lz
 
 
 @njit(cache=True, nogil=True)
