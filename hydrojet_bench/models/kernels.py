@@ -25,8 +25,9 @@ general rod (cubic coefficient beta of the section law, possibly 0, and any dist
 moment in the profile), None the plain rod (linear section law, no distributed moment).
 Numba compiles a kernel per argument type and drops the branches a None rules out, so
 the plain rod, every library effect but nonlinear elasticity, gets a shot without the
-Newton solve of the section law and the distributed-moment products: 17 % less time
-per shot, which the general kernel, testing them at every RK4 stage, cannot reach.
+Newton solve of the section law and the distributed-moment products: a fifth less time
+per shot (2.0 -> 1.55 us) than the general kernel, which tests for them at every RK4
+stage, and a tenth less per tangent shot.
 
 Everything here is nondimensional: lengths by L, moments by EI_ref / L and forces by
 EI_ref / L^2 (EI_ref = E0 * I), so the unknowns and residuals are of order one and a
@@ -231,9 +232,9 @@ def _tangent_rates(t, u, c, l, start, a, previous, dn, out):
     of the tangent start[:, d] + a * previous[:, d] (15 rows: dp, dR row-major, dm; one
     column per direction) at the stage state ``t`` (18-tuple), whose curvature is ``u``
     and local compliance ``c`` (`_curvature_compliance`); ``l`` the row's scaled
-    body-frame distributed moment (None on the plain rod). dn (3, D) is constant along the rod: the distributed
-    force does not depend on the state. Directions are columns so the loop runs over
-    contiguous memory."""
+    body-frame distributed moment (None on the plain rod). dn (3, D) is constant along
+    the rod: the distributed force does not depend on the state. Directions are columns
+    so the loop runs over contiguous memory."""
     (px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, nx, ny, nz, gx, gy, gz) = t
     ux, uy, uz = u
     for d in range(start.shape[1]):
