@@ -88,6 +88,16 @@ def test_the_plain_rod_kernel_is_the_general_kernel_without_its_terms(seed):
     for general, plain in zip(shots[0.0], shots[None]):
         np.testing.assert_allclose(plain, general, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(_shot(x, reference, profile, tip, base, None), shots[0.0][0], rtol=1e-12, atol=1e-14)
+    # The PRB chain's joints use the same section law.
+    chain = {}
+    for beta in (0.0, None):
+        residual, y = np.empty(3), np.empty(18)
+        nodes_p, nodes_r = np.empty((RESOLUTION + 2, 3)), np.empty((RESOLUTION + 2, 3, 3))
+        kernels.shoot(kernels.PRB, RESOLUTION, x, reference, profile, tip, base, beta, 1.0, residual, y,
+                      np.empty((3, 3)), nodes_p, nodes_r, True)
+        chain[beta] = (residual, y, nodes_p, nodes_r)
+    for general, plain in zip(chain[0.0], chain[None]):
+        np.testing.assert_allclose(plain, general, rtol=1e-12, atol=1e-14)
 
 
 def test_a_prepared_problem_takes_the_plain_kernel_only_without_cubic_law_and_distributed_moment():
