@@ -12,7 +12,7 @@ Frames: "tracker" is the EM tracker's frame, the lab frame of every emulator. Or
 from __future__ import annotations
 
 import threading
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
@@ -25,7 +25,8 @@ VALVE_COUNT = 3
 
 @dataclass(frozen=True)
 class SensorTruth:
-    """Exact state of one sensor at one instant.
+    """Exact state of one sensor at one instant (from `sensor_truths`: at n instants,
+    every field stacked over them, (n, 4) and (n, 3)).
 
     orientation_in_tracker: unit quaternion (w, x, y, z), sensor frame -> tracker frame.
     position_in_tracker_m: sensor origin in the tracker frame, metres.
@@ -60,6 +61,37 @@ class Plant(Protocol):
         """The valve emulator reports the duty (0-1000 per mille) of each of the three
         valves whenever it changes, including the watchdog closing them all."""
         ...
+
+
+@runtime_checkable
+class BatchPlant(Plant, Protocol):
+    """A plant that answers a run of instants in one call (the digital twin does)."""
+
+    def sensor_truths(self, sensor: str, t_s: np.ndarray) -> SensorTruth:
+        """`sensor_truth` at each of ``t_s`` (1-D, s), every field stacked over them:
+        (n, 4) orientations and (n, 3) vectors."""
+        ...
+
+
+def truths_at_instants(plant: Plant) -> Callable[[str, np.ndarray], SensorTruth]:
+    """``(sensor, t_s) -> SensorTruth`` over a 1-D array of instants for any plant: its own
+    `BatchPlant.sensor_truths` where it has one, else its `sensor_truth` one instant at a
+    time. Asked once (an isinstance check on a Protocol costs ~20 us)."""
+    if isinstance(plant, BatchPlant):
+        return plant.sensor_truths
+
+    def one_at_a_time(sensor: str, t_s: np.ndarray) -> SensorTruth:
+        states = [plant.sensor_truth(sensor, float(t)) for t in np.asarray(t_s, dtype=float)]
+
+        def stacked(field_name: str, size: int) -> np.ndarray:
+            rows = [np.asarray(getattr(state, field_name), dtype=float) for state in states]
+            return np.array(rows).reshape(len(states), size)
+
+        return SensorTruth(stacked("orientation_in_tracker", 4), stacked("position_in_tracker_m", 3),
+                           stacked("angular_velocity_in_sensor_rad_s", 3),
+                           stacked("linear_acceleration_in_tracker_m_s2", 3))
+
+    return one_at_a_time
 
 
 class StaticPlant:

@@ -20,6 +20,8 @@ from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from drivers.aurora.emulator import AuroraEmulator
 from drivers.imu.emulator import Icm20948BusEmulator
 from drivers.plant import SensorTruth
@@ -49,6 +51,9 @@ class SessionPlant:
 
     def sensor_truth(self, sensor: str, t_s: float) -> SensorTruth:
         return self.twin.sensor_truth(sensor, t_s)
+
+    def sensor_truths(self, sensor: str, t_s: np.ndarray) -> SensorTruth:
+        return self.twin.sensor_truths(sensor, t_s)
 
     def apply_valve_duties(self, duties_permille: Sequence[int], t_s: float) -> None:
         self.twin.apply_valve_duties(duties_permille, self.clock.now())

@@ -57,7 +57,7 @@ from ..params import JET_COUNT, ModelParameters, with_parameters
 from ..plans import Plan, PlanStep
 from .config import TwinConfig
 from .recording import TwinRecording
-from .settling import settling_state
+from .settling import settling_state, settling_states_into
 
 SENSORS = ("base", "tip")
 SENSOR_CHOICES = ("em", "imu", "truth")
@@ -266,6 +266,34 @@ class DigitalTwin:
             segment.target_orientation, segment.rotation_offset_rad, segment.target_position_m,
             segment.position_offset_m, index, decay, self._tau_s)
         return SensorTruth(orientation, position, angular_velocity, acceleration)
+
+    def sensor_truths(self, sensor: str, t_s: np.ndarray) -> SensorTruth:
+        """`BatchPlant` hook: `sensor_truth` at each of ``t_s`` (1-D, s) at once, every
+        field stacked over them ((n, 4) and (n, 3)); bit for bit the single-instant
+        answers. An emulated IMU's FIFO asks a run of sample instants at each look."""
+        index = self._sensor_index(sensor)
+        times = np.ascontiguousarray(t_s, dtype=float)
+        if times.ndim != 1 or not np.all(np.isfinite(times)):
+            raise ValueError(f"t_s must be a 1-D array of finite times, got {t_s!r}")
+        count = times.size
+        orientations, positions = np.empty((count, 4)), np.empty((count, 3))
+        angular_velocities, accelerations = np.empty((count, 3)), np.empty((count, 3))
+        with self._lock:
+            segments = [self._segment_at(t) for t in times.tolist()]
+        start = 0
+        while start < count:  # runs of instants in one segment: usually the whole batch
+            segment = segments[start]
+            stop = start + 1
+            while stop < count and segments[stop] is segment:
+                stop += 1
+            # Each decay as `sensor_truth` computes it (math.exp, not np.exp: bit for bit).
+            decays = np.array([math.exp(-max(t - segment.start_s, 0.0) / self._tau_s) if self._tau_s > 0.0 else 0.0
+                               for t in times[start:stop].tolist()])
+            settling_states_into(segment.target_orientation, segment.rotation_offset_rad, segment.target_position_m,
+                                 segment.position_offset_m, index, decays, self._tau_s, orientations[start:stop],
+                                 positions[start:stop], angular_velocities[start:stop], accelerations[start:stop])
+            start = stop
+        return SensorTruth(orientations, positions, angular_velocities, accelerations)
 
     # --- measurements ---------------------------------------------------------------
 

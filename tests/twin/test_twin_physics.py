@@ -288,3 +288,23 @@ def test_the_truth_at_one_instant_is_the_vectorised_pose(tau):
             truth = twin.sensor_truth(sensor, float(t_s))
             np.testing.assert_allclose(truth.orientation_in_tracker, q, rtol=0.0, atol=1e-15)
             np.testing.assert_allclose(truth.position_in_tracker_m, p, rtol=0.0, atol=1e-15)
+
+
+@pytest.mark.parametrize("tau", [0.0, 0.4])
+def test_the_truths_at_a_run_of_instants_are_the_single_instant_ones_bit_for_bit(tau):
+    # What an emulated IMU's FIFO asks in one call must be what it would have asked one
+    # instant at a time (its batched run is tested bit for bit against that), across
+    # commands and with the instants in any order (motion, then magnetometer instants).
+    twin = quiet_twin(settle_time_constant_s=tau)
+    twin.command_jet_forces((0.08, 0.02, 0.0), 2.0)
+    twin.command_jet_forces((0.0, 0.0, 0.11), 2.3)
+    times = np.array([2.0, 2.1, 2.3, 2.31, 2.5, 4.0, 1.999, 0.0, 2.05])
+    for sensor in ("base", "tip"):
+        truths = twin.sensor_truths(sensor, times)
+        for row, t_s in enumerate(times):
+            truth = twin.sensor_truth(sensor, float(t_s))
+            for name in ("orientation_in_tracker", "position_in_tracker_m", "angular_velocity_in_sensor_rad_s",
+                         "linear_acceleration_in_tracker_m_s2"):
+                assert getattr(truths, name)[row].tobytes() == getattr(truth, name).tobytes(), (name, t_s)
+    with pytest.raises(ValueError, match="1-D array of finite times"):
+        twin.sensor_truths("tip", np.array([1.0, np.nan]))
