@@ -272,14 +272,17 @@ class DigitalTwin:
         field stacked over them ((n, 4) and (n, 3)); bit for bit the single-instant
         answers. An emulated IMU's FIFO asks a run of sample instants at each look."""
         index = self._sensor_index(sensor)
-        times = np.ascontiguousarray(t_s, dtype=float)
-        if times.ndim != 1 or not np.all(np.isfinite(times)):
+        times = np.asarray(t_s, dtype=float)
+        # Checked on a list: numpy's isfinite and all cost more than the whole batch.
+        instants = times.tolist()
+        if times.ndim != 1 or not all(map(math.isfinite, instants)):
             raise ValueError(f"t_s must be a 1-D array of finite times, got {t_s!r}")
-        count = times.size
+        count = len(instants)
         orientations, positions = np.empty((count, 4)), np.empty((count, 3))
         angular_velocities, accelerations = np.empty((count, 3)), np.empty((count, 3))
+        tau_s = self._tau_s
         with self._lock:
-            segments = [self._segment_at(t) for t in times.tolist()]
+            segments = list(map(self._segment_at, instants))
         start = 0
         while start < count:  # runs of instants in one segment: usually the whole batch
             segment = segments[start]
@@ -287,10 +290,10 @@ class DigitalTwin:
             while stop < count and segments[stop] is segment:
                 stop += 1
             # Each decay as `sensor_truth` computes it (math.exp, not np.exp: bit for bit).
-            decays = np.array([math.exp(-max(t - segment.start_s, 0.0) / self._tau_s) if self._tau_s > 0.0 else 0.0
-                               for t in times[start:stop].tolist()])
+            decays = np.array([math.exp(-max(t - segment.start_s, 0.0) / tau_s) if tau_s > 0.0 else 0.0
+                               for t in instants[start:stop]])
             settling_states_into(segment.target_orientation, segment.rotation_offset_rad, segment.target_position_m,
-                                 segment.position_offset_m, index, decays, self._tau_s, orientations[start:stop],
+                                 segment.position_offset_m, index, decays, tau_s, orientations[start:stop],
                                  positions[start:stop], angular_velocities[start:stop], accelerations[start:stop])
             start = stop
         return SensorTruth(orientations, positions, angular_velocities, accelerations)

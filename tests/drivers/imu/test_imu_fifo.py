@@ -201,18 +201,25 @@ def test_records_written_after_a_pop_behind_a_cut_record_are_never_decoded() -> 
 
 @settings(max_examples=25, deadline=None)
 @given(gaps=st.lists(st.tuples(st.floats(0.0, 0.25), st.lists(st.floats(0.0, 1.0), max_size=4)),
-                     min_size=1, max_size=6))
+                     min_size=1, max_size=6), accel_late_s=st.sampled_from([0.0, 0.0013, 0.0061]))
 # Found by hypothesis: the chips ran once while the FIFO overflowed, and the noise of the
 # next read differed.
-@example(gaps=[(0.25, [0.9375]), (0.125, [])])
-def test_chips_sampling_between_reads_change_nothing_a_read_finds(gaps) -> None:
+@example(gaps=[(0.25, [0.9375]), (0.125, [])], accel_late_s=0.0)
+# The simulated rig's grids: the host's divider writes are real time apart.
+@example(gaps=[(0.1, [0.31, 0.77]), (0.05, [0.5])], accel_late_s=0.0013)
+def test_chips_sampling_between_reads_change_nothing_a_read_finds(gaps, accel_late_s) -> None:
     # `run_chips` (the simulated rig calls it between reads) only moves the sampling
     # work earlier: the same reads, of a moving tip, get the same samples, stamps and
-    # overflows (waits up to 0.25 s: past the FIFO's 22 records). Once a FIFO has
-    # overflowed the noise may differ: instants a full FIFO drops are not sampled, so
-    # how many noise draws they cost depends on when the chip was looked at.
+    # overflows (waits up to 0.25 s: past the FIFO's 22 records), also when the accel's
+    # grid lags the gyro's. Once a FIFO has overflowed the noise may differ: instants a
+    # full FIFO drops are not sampled, so how many noise draws they cost depends on when
+    # the chip was looked at.
     lazy, lazy_clock, lazy_imu = started(WobblingPlant(start_s=100.0))
     busy, busy_clock, busy_imu = started(WobblingPlant(start_s=100.0))
+    for clock, imu in ((lazy_clock, lazy_imu), (busy_clock, busy_imu)):
+        if accel_late_s:
+            clock.sleep(accel_late_s)
+            imu.write_register(2, reg.ACCEL_SMPLRT_DIV_2, imu.sample_rate_divider)
     overflowed = False
     for wait_s, run_fractions in gaps:
         done = 0.0
@@ -229,6 +236,23 @@ def test_chips_sampling_between_reads_change_nothing_a_read_finds(gaps) -> None:
         if not overflowed:
             assert [replace(s, t_s=0.0) for s in got.samples] == [replace(s, t_s=0.0) for s in expected.samples]
         overflowed = overflowed or expected.overflowed
+
+
+def test_with_the_fifo_on_a_register_read_still_shows_the_newest_accel_sample() -> None:
+    # Looks at the chip make FIFO records at gyro instants only; an accel instant after
+    # the newest of them is latched when the sample registers are read.
+    emulator, clock, imu = started(WobblingPlant(start_s=100.0))
+    clock.sleep(0.0013)
+    imu.write_register(2, reg.ACCEL_SMPLRT_DIV_2, imu.sample_rate_divider)
+    chip = emulator.chips[0x69]
+    clock.sleep(0.1)
+    emulator.run_chips()
+    newest_accel = math.floor((clock() - chip.accel_grid.origin_s) / chip.accel_period_s + 1e-9)
+    assert chip.accel_grid.index == newest_accel - 1  # its newest instant is after the gyro's
+    imu.read_fifo()  # the FIFO's registers: still not latched
+    assert chip.accel_grid.index == newest_accel - 1
+    imu.read_registers(0, reg.ACCEL_XOUT_H, 6)
+    assert chip.accel_grid.index == newest_accel
 
 
 # --- the batched run against instant by instant --------------------------------------------
