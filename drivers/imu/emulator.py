@@ -1072,8 +1072,9 @@ class Icm20948BusEmulator:
         too. A later read finds the same samples whenever this is called (the FIFO tests
         check it), until a FIFO overflows: instants a full FIFO drops are not sampled, so
         the noise draws they cost, and the noise after them, depend on when the chip was
-        looked at. Called often (`bench.simulated_rig` does, beside a session), it does
-        the sampling work in small slices instead of all at the read."""
+        looked at. Called often, it does the sampling work in small slices instead of
+        all at the read (the simulated rig no longer does: a read's batched run costs
+        less than the looks between reads did)."""
         with self._lock:
             now = self.clock()
             for chip in self.chips.values():

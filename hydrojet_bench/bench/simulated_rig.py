@@ -13,7 +13,6 @@ SMBus-compatible object either way.
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import itertools
 from collections.abc import AsyncIterator, Sequence
@@ -98,38 +97,14 @@ async def simulated_devices(profile: RigProfile, settings: RigConfig, clock: Clo
             tracker_url = await _serve(stack, transports.tracker, f"aurora-{suffix}", aurora_emulator)
         imu_bus = None
         if transports.imu_bus == SIM:
+            # No task samples the chips between reads: each FIFO read makes the records of
+            # the instants since the last in one batch (0.1-0.2 ms for 5 samples of both
+            # chips on a slow host). Sampling every two periods beside the session cost
+            # a fifth of the IMU rate it could keep at 25x.
             imu_bus = Icm20948BusEmulator(plant, clock.now, sensors={settings.imu.base_address: "base",
                                                                      settings.imu.tip_address: "tip"},
                                           seed=config.seed)
-            await stack.enter_async_context(_chips_running(imu_bus, clock))
         yield SimulatedDevices(twin, valves_url, tracker_url, imu_bus, valve_emulator, aurora_emulator)
-
-
-# How often the emulated IMUs sample on their own between reads, in output periods.
-_CHIP_RUN_PERIODS = 2.0
-
-
-@contextlib.asynccontextmanager
-async def _chips_running(bus: Icm20948BusEmulator, clock: Clock) -> AsyncIterator[None]:
-    """Let the emulated chips sample every couple of output periods, as silicon does on its
-    own: a FIFO read then finds its records made and only copies them. Made at the read,
-    five samples of two chips held the event loop 0.3-0.7 ms at 25x, long enough to
-    make a tracker poll miss its 1 ms frame."""
-
-    async def run() -> None:
-        while True:
-            # Read each time: the host sets the output rate after the bus exists.
-            periods = [chip.period_s for chip in bus.chips.values()]
-            await clock.sleep(_CHIP_RUN_PERIODS * min(periods, default=0.01))
-            bus.run_chips()
-
-    task = asyncio.get_running_loop().create_task(run(), name="imu-chips")
-    try:
-        yield
-    finally:
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
 
 
 async def _serve(stack: contextlib.AsyncExitStack, mode: str, name: str, emulator: Any) -> str:

@@ -42,4 +42,6 @@ def floats(values: ArrayLike | None) -> tuple[float, ...] | None:
     None stays None (a field that is not measured)."""
     if values is None:
         return None
+    if type(values) is tuple and all(type(value) is float for value in values):
+        return values  # already one: a log write per sample, thousands a second
     return tuple(np.asarray(values, dtype=float).tolist())

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 import threading
 import time
 from collections import deque
@@ -186,7 +187,9 @@ class LogWriter:
             raise ValueError(f"{self.path}: the log is closed")
 
     def _log_time(self, topic: str, t_s: float) -> int:
-        if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.number)) or not np.isfinite(t_s):
+        # math, not numpy: asked for every record, thousands a second (np.isfinite of a
+        # scalar costs 15x as much).
+        if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.number)) or not math.isfinite(t_s):
             raise ValueError(f"{topic}: t_s must be a finite number of seconds, got {t_s!r}")
         log_time = self.start_time_ns + round(float(t_s) * _NS_PER_S)
         if log_time < 0:
