@@ -769,15 +769,17 @@ class _EmulatedIcm20948:
         # The newest accel instant at each gyro instant, as `_Grid.advance` finds it: the
         # same one when the two grids coincide, else one more truth to ask for.
         accel_grid, accel_period = self.accel_grid, self.accel_period_s
-        accel_rows = np.full(count, -1, dtype=np.int64)
+        accel_rows = [-1] * count
         accel_index = accel_grid.index
         for row, t in enumerate(instants[:count]):
             index = math.floor((t - accel_grid.origin_s) / accel_period + 1e-9)
             if index > accel_index:
                 accel_index = index
                 accel_t = accel_grid.origin_s + index * accel_period
-                accel_rows[row] = row if accel_t == t else len(instants)
-                if accel_t != t:
+                if accel_t == t:
+                    accel_rows[row] = row
+                else:
+                    accel_rows[row] = len(instants)
                     instants.append(accel_t)
         first_latch = len(instants)
         bank0, bank3 = self.banks[0], self.banks[3]
@@ -811,7 +813,7 @@ class _EmulatedIcm20948:
         settings = np.array((not disabled & reg.PWR_MGMT_2_DISABLE_ACCEL, not disabled & reg.PWR_MGMT_2_DISABLE_GYRO,
                              bank3[reg.I2C_SLV0_REG], length, ak.last_index, ak.locked, first_latch), dtype=np.int64)
         records = np.empty((count, self._record_length), dtype=np.uint8)
-        _fifo_run(count, times, accel_rows,
+        _fifo_run(count, times, np.array(accel_rows, dtype=np.int64),
                   state.orientation_in_tracker, state.angular_velocity_in_sensor_rad_s,
                   state.linear_acceleration_in_tracker_m_s2, self.mounting, self._soft_iron, vectors, scalars,
                   settings, self._motion_normals.take(9 * count).reshape(count, 9),
