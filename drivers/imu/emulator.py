@@ -405,18 +405,6 @@ class _EmulatedAk09916:
 
     def read(self, address: int, length: int, now: float) -> bytes:
         self.update(now)
-        end = address + length - 1
-        if reg.AK_ST1 <= address and end <= reg.AK_ST2:
-            # One run of ST1..ST2, whose addresses simply count up: the master's copy at
-            # every sample. The bytes as they were, then what reading them does.
-            out = bytes(self.regs[address:end + 1])
-            if address <= reg.AK_TMPS and end >= reg.AK_HXL:
-                self.regs[reg.AK_ST1] &= ~(reg.AK_ST1_DRDY | reg.AK_ST1_DOR) & 0xFF
-                self.locked = True
-            if end == reg.AK_ST2:
-                self.regs[reg.AK_ST1] &= ~(reg.AK_ST1_DRDY | reg.AK_ST1_DOR) & 0xFF
-                self.locked = False
-            return out
         out = bytearray()
         for _ in range(length):
             out.append(self.regs[address])

@@ -208,8 +208,8 @@ def test_records_written_after_a_pop_behind_a_cut_record_are_never_decoded() -> 
 # The simulated rig's grids: the host's divider writes are real time apart.
 @example(gaps=[(0.1, [0.31, 0.77]), (0.05, [0.5])], accel_late_s=0.0013)
 def test_chips_sampling_between_reads_change_nothing_a_read_finds(gaps, accel_late_s) -> None:
-    # `run_chips` (the simulated rig calls it between reads) only moves the sampling
-    # work earlier: the same reads, of a moving tip, get the same samples, stamps and
+    # `run_chips` (a look at the chips between reads, as silicon samples on its own)
+    # only moves the sampling work earlier: the same reads, of a moving tip, get the same samples, stamps and
     # overflows (waits up to 0.25 s: past the FIFO's 22 records), also when the accel's
     # grid lags the gyro's. Once a FIFO has overflowed the noise may differ: instants a
     # full FIFO drops are not sampled, so how many noise draws they cost depends on when
