@@ -21,6 +21,8 @@ _SMALL_ANGLE_RAD = 1e-6
 
 
 def _four(quaternion: ArrayLike) -> list[float]:
+    if type(quaternion) is np.ndarray and quaternion.dtype.kind == "f":
+        return quaternion.tolist()  # a filter's output, thousands a second: no copy to float64 first
     return np.asarray(quaternion, dtype=float).tolist()
 
 
