@@ -787,8 +787,8 @@ class _EmulatedIcm20948:
                     instants.append(since + index / rate)
         latches = len(instants) - first_latch
         times = np.array(instants)
-        state = self.owner.truths_at_instants(self.sensor, times)
         owner = self.owner
+        state = owner.truths_at_instants(self.sensor, times)
         vectors = np.array((owner.plant.gravity_in_tracker_m_s2, owner.field_in_tracker_ut(self.sensor),
                             self._gyro_bias_constant_rad_s, self._accel_gain, self._gyro_gain, self._hard_iron_ut,
                             self._die_signs, self.bias_drift_rad_s), dtype=float)
