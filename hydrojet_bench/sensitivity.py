@@ -98,6 +98,23 @@ def disturbance_columns(model: ShootingModel, prepared: PreparedProblem, nominal
     return columns / unit, seed
 
 
+def disturbance_columns_batch(model: ShootingModel, jet_forces_n: np.ndarray, params: ModelParameters,
+                              nominals: Sequence[Solution], components: np.ndarray,
+                              steps: np.ndarray) -> tuple[np.ndarray, list[Solution]]:
+    """`disturbance_columns` at the solutions ``nominals`` of rows of jet forces ((k, 3),
+    N) under ``params``: (k, 6, len(components)) columns and the seeds, in one kernel
+    call when the jets alone change the packed problem (`ShootingModel.shares_packing`),
+    else pose by pose."""
+    template = model.prepare(jet_forces_n[0], params)
+    if not model.shares_packing(template):
+        pairs = [disturbance_columns(model, model.prepare(jets, params), nominal, components, steps)
+                 for jets, nominal in zip(jet_forces_n, nominals)]
+        return np.array([columns for columns, _ in pairs]), [seed for _, seed in pairs]
+    unit = np.where(components < 3, template.force_scale_n, template.moment_scale_nm)
+    columns, seeds = model.tip_wrench_columns_batch(template, jet_forces_n, nominals, components, steps / unit)
+    return columns / unit, seeds
+
+
 def parameter_steps(model: ShootingModel, params: ModelParameters, names: Sequence[str],
                     relative_step: float = DEFAULT_RELATIVE_STEP) -> np.ndarray:
     """The finite-difference step of each parameter: ``relative_step`` times its magnitude,

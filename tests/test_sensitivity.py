@@ -10,7 +10,7 @@ import pytest
 from hydrojet_bench.effects.setup import BaseSensorMounting
 from hydrojet_bench.models import CosseratModel, PrbModel, Solution
 from hydrojet_bench.params import DISTURBANCE_NAMES, ModelParameters, with_parameters
-from hydrojet_bench.sensitivity import sensitivity
+from hydrojet_bench.sensitivity import disturbance_columns, disturbance_columns_batch, parameter_steps, sensitivity
 
 PARAMS = ModelParameters(gravity_in_base_m_s2=(-9.81, 0.0, 0.0))
 JETS = [0.05, 0.0, 0.02]
@@ -79,3 +79,21 @@ def test_unknown_parameter_is_reported():
         sensitivity(CosseratModel(), JETS, PARAMS, ("jet_gain.gain_1",))
     with pytest.raises(ValueError, match="at least one"):
         sensitivity(CosseratModel(), JETS, PARAMS, ())
+
+
+@pytest.mark.parametrize("effects", [("gravity",), ("gravity", "pressure_stiffening")],
+                         ids=["shared-packing", "packing-per-pose"])
+@pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=["cosserat", "prb"])
+def test_batched_disturbance_columns_are_each_poses_own_bit_for_bit(model_type, effects):
+    model = model_type(effects)
+    params = ModelParameters(gravity_in_base_m_s2=(-9.81, 0.0, 0.0))
+    jets = np.random.default_rng(3).uniform(0.0, 0.12, (5, 3))
+    nominals = [model.solve(row, params) for row in jets]
+    components = np.array([0, 4, 5], dtype=np.int64)
+    steps = parameter_steps(model, params, [DISTURBANCE_NAMES[k] for k in components])
+    columns, seeds = disturbance_columns_batch(model, jets, params, nominals, components, steps)
+    for row, nominal in enumerate(nominals):
+        expected, seed = disturbance_columns(model, model.prepare(jets[row], params), nominal, components, steps)
+        np.testing.assert_array_equal(columns[row], expected)
+        np.testing.assert_array_equal(seeds[row].jacobian, seed.jacobian)
+        assert seeds[row].positions_in_base_m is nominal.positions_in_base_m

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from itertools import groupby
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -45,9 +46,9 @@ from ..data.dataset import Dataset
 from ..effects import CALIBRATION_POSES, SWEEPS, Effect, EffectParameter, identifying_rows
 from ..errors import ConvergenceError
 from ..geometry import body_rotation_error, matrix_from_quat
-from ..models.shooting import ShootingModel, Solution
+from ..models.shooting import ShootingModel, Solution, tip_sensors_in_base_sensor
 from ..params import DISTURBANCE_NAMES, PARAMETER_NAMES, ModelParameters, get_parameter, with_parameters
-from ..sensitivity import (DEFAULT_RELATIVE_STEP, disturbance_columns, effect_parameter, parameter_scale,
+from ..sensitivity import (DEFAULT_RELATIVE_STEP, disturbance_columns_batch, effect_parameter, parameter_scale,
                            parameter_steps)
 
 # Physical bounds of the core parameters; effect parameters carry their own.
@@ -161,6 +162,7 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
                           if use_positions else None)
     offsets = np.array([poses[index].position_offset_in_tip_m or (0.0, 0.0, 0.0) for index in fitted_indices])
     disturbance_indices = [column for column, name in enumerate(names) if name in DISTURBANCE_NAMES]
+    jet_forces = np.array([pose.jet_forces_n for pose in poses], dtype=float).reshape(len(poses), 3)
     cache: dict[bytes, tuple[np.ndarray, list[Solution], list[ModelParameters]]] = {}
     # Each pose's solution at the last evaluated parameters: the optimiser moves them a
     # little per evaluation, so they seed the next solves far better than the previous
@@ -176,26 +178,33 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
     def residual_rows(solutions: Sequence[Solution]) -> np.ndarray:
         """(fitted poses, rows_per_pose) residuals of solutions at the fitted poses."""
         rows = np.empty((len(solutions), rows_per_pose))
-        predicted = np.array([solution.tip_sensor_in_base_sensor() for solution in solutions])
-        rows[:, :3] = body_rotation_error(predicted, measured)
+        rows[:, :3] = body_rotation_error(tip_sensors_in_base_sensor(solutions), measured)
         if measured_positions is not None:
             positions = np.array([s.tip_sensor_position_in_base_sensor_m(o) for s, o in zip(solutions, offsets)])
             rows[:, 3:] = position_weight_rad_per_m * (positions - measured_positions)
         return rows
 
+    def runs(rows: Sequence[int], params: list[ModelParameters]) -> list[list[int]]:
+        """Positions in ``rows`` cut into runs of poses under one parameter object: each
+        run is one batch of kernel work."""
+        return [list(run) for _, run in groupby(range(len(rows)), key=lambda k: id(params[rows[k]]))]
+
+    def solve_poses(rows: Sequence[int], params: list[ModelParameters], warm_starts: Sequence[Solution | None],
+                    along_path: bool) -> list[Solution]:
+        """Solve poses ``rows`` in order, each from its warm start or else the pose solved
+        before it, one `solve_batch` per run."""
+        solutions: list[Solution] = []
+        for run in runs(rows, params):
+            solutions.extend(model.solve_batch(
+                jet_forces[[rows[k] for k in run]], params[rows[run[0]]], [warm_starts[k] for k in run],
+                solutions[-1] if solutions else None, along_path=along_path))
+        return solutions
+
     def evaluate(x: np.ndarray) -> tuple[np.ndarray, list[Solution], list[ModelParameters]]:
         key = x.tobytes()
         if key not in cache:
             params = parameters_at(x)
-            solutions: list[Solution] = []
-            previous: Solution | None = None
-            for index, pose in enumerate(poses):
-                if follow_path:
-                    previous = model.solve(pose.jet_forces_n, params[index], previous=previous,
-                                           warm_start=last[index])
-                else:
-                    previous = model.solve(pose.jet_forces_n, params[index], warm_start=last[index] or previous)
-                solutions.append(previous)
+            solutions = solve_poses(range(len(poses)), params, last, follow_path)
             last[:] = solutions
             residuals = residual_rows([solutions[index] for index in fitted_indices]).ravel()
             cache.clear()  # only the latest point is asked for again (by the Jacobian)
@@ -228,12 +237,17 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
             components = np.array([DISTURBANCE_NAMES.index(name) for name in wanted], dtype=np.int64)
             # w_d is fitted, so every pose has the same value and the same steps.
             steps = parameter_steps(model, params[0], wanted)
+            # No pose here takes its history: along a path with state ``batched`` is empty.
+            by_pose = np.empty((len(fitted_indices), 6, len(batched)))
+            for run in runs(fitted_indices, params):
+                indices = [fitted_indices[k] for k in run]
+                by_pose[run], run_seeds = disturbance_columns_batch(
+                    model, jet_forces[indices], params[indices[0]], [solutions[index] for index in indices],
+                    components, steps)
+                for index, seed in zip(indices, run_seeds):
+                    seeds[index] = seed
             for row, index in enumerate(fitted_indices):
-                pose, solution = poses[index], solutions[index]
-                # Each perturbed solve starts from the same history as the nominal one.
-                history = solutions[index - 1] if follow_path and index > 0 else None
-                prepared = model.prepare(pose.jet_forces_n, params[index], history)
-                columns, seeds[index] = disturbance_columns(model, prepared, solution, components, steps)
+                solution, columns = solutions[index], by_pose[row]
                 rows = np.empty((rows_per_pose, len(batched)))
                 # d(log(R_pred^T R_meas))/dzeta = -(tip sensor mounting)^T S_rot, to first order.
                 rows[:3] = -solution.tip_sensor_mounting.T @ columns[3:]
@@ -253,19 +267,13 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
             shifted = x.copy()
             shifted[column] += step
             perturbed_params = parameters_at(shifted)
-            perturbed: list[Solution] = []
             if along_path:
-                previous = None
-                for index, pose in enumerate(poses):
-                    previous = model.solve(pose.jet_forces_n, perturbed_params[index], previous=previous,
-                                           warm_start=solutions[index])
-                    perturbed.append(previous)
+                perturbed = solve_poses(range(len(poses)), perturbed_params, solutions, True)
                 perturbed = [perturbed[index] for index in fitted_indices]
             else:
-                for index in fitted_indices:
-                    history = solutions[index - 1] if follow_path and index > 0 else None
-                    perturbed.append(model.solve(poses[index].jet_forces_n, perturbed_params[index],
-                                                 previous=history, warm_start=seeds[index]))
+                # Without path state a pose's solve does not depend on the one before it.
+                perturbed = solve_poses(fitted_indices, perturbed_params, [seeds[index] for index in fitted_indices],
+                                        False)
             matrix[:, column] = (residual_rows(perturbed).ravel() - residuals) / step
         return matrix
 

@@ -1016,6 +1016,30 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
 
 
 @njit(cache=True, nogil=True)
+def solve_batch(kind, resolution, references, jacobians, seeded, profile, tips, base, beta, tolerance,
+                max_iterations, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation, info):
+    """Warm `solve` of k problems that differ only in their tip loads (``tips``, one row
+    each), in order and in one call: each problem's output arrays are the k-th slices of
+    ``references`` ... ``info``. A problem not ``seeded`` starts from the one before it:
+    its tip frame as that solution reports it and its updated matrix, as a sequence of
+    single warm solves would. The first problem must be seeded. Stops at the first
+    problem that does not converge and returns how many did."""
+    last = nodes_p.shape[1] - 1
+    for k in range(tips.shape[0]):
+        if not seeded[k]:
+            for i in range(3):
+                for j in range(3):
+                    references[k, i, j] = nodes_r[k - 1, last, i, j]
+                    jacobians[k, i, j] = jacobians[k - 1, i, j]
+        solve(kind, resolution, references[k], jacobians[k], True, profile, tips[k], base, beta, 1.0, tolerance,
+              max_iterations, length, wrench_scale, nodes_p[k], nodes_r[k], base_wrench[k], clamp_rotation[k],
+              info[k])
+        if info[k, 0] != CONVERGED:
+            return k
+    return tips.shape[0]
+
+
+@njit(cache=True, nogil=True)
 def sensor_rotation(base_mounting, rotation, tip_mounting):
     """base_mounting^T rotation tip_mounting, as a new matrix: what two orientation sensors
     mounted so on the base and the tip read."""
@@ -1166,3 +1190,16 @@ def tip_wrench_sensitivity(kind, resolution, reference, profile, tip, base, beta
             if not np.isfinite(columns[k, column]):
                 return False
     return True
+
+
+@njit(cache=True, nogil=True)
+def tip_wrench_sensitivity_batch(kind, resolution, references, profile, tips, base, beta, components, steps, length,
+                                 jacobians, columns):
+    """`tip_wrench_sensitivity` at k solutions of problems that differ only in their tip
+    loads (``tips``, one row each), in one call; each solution's inputs and outputs are
+    the k-th slices. Stops at the first that fails and returns how many succeeded."""
+    for k in range(tips.shape[0]):
+        if not tip_wrench_sensitivity(kind, resolution, references[k], profile, tips[k], base, beta, components, steps,
+                                      length, jacobians[k], columns[k]):
+            return k
+    return tips.shape[0]

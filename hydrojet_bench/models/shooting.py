@@ -130,6 +130,15 @@ class Solution:
         return quat_from_matrix(self.tip_sensor_in_base_sensor())
 
 
+def tip_sensors_in_base_sensor(solutions: Sequence[Solution]) -> np.ndarray:
+    """(k, 3, 3): `Solution.tip_sensor_in_base_sensor` of each solution, as stacked products
+    (a calibration asks for thousands; one call each cost more than its solve's set-up)."""
+    base = np.array([solution.base_sensor_mounting for solution in solutions])
+    tip = np.array([solution.rotations_in_base[-1] for solution in solutions])
+    tip_mounting = np.array([solution.tip_sensor_mounting for solution in solutions])
+    return np.swapaxes(base, 1, 2) @ (tip @ tip_mounting)
+
+
 # slots: a warm solve builds one per call (`with_jets`), and a slots instance costs half.
 @dataclass(slots=True)
 class PreparedProblem:
@@ -240,12 +249,16 @@ class ShootingModel:
         if jets.shape != (3,) or not all(map(math.isfinite, jets.tolist())):
             raise ValueError(f"jet_forces_n must be 3 finite numbers, got {jet_forces_n!r}")
         cached = self._cached
-        if (cached is not None and cached.problem.params is params and not self._uses_actuation
-                and not cached.problem.depends_on_previous_state):
+        if cached is not None and cached.problem.params is params and self.shares_packing(cached):
             return cached.with_jets(jets)
         prepared = self._pack(self.build_problem(jets, params, previous))
         self._cached = prepared
         return prepared
+
+    def shares_packing(self, prepared: PreparedProblem) -> bool:
+        """Whether other jet forces under the same parameters pack to this problem with
+        only the jets changed: no effect reads them and the clamp has no path state."""
+        return not self._uses_actuation and not prepared.problem.depends_on_previous_state
 
     def _pack(self, problem: RodProblem) -> PreparedProblem:
         params = problem.params
@@ -308,7 +321,7 @@ class ShootingModel:
         is expected to turn from ``warm_start``'s (a rotation vector in its tip frame, from
         a sensitivity): the solver then starts there, with ``warm_start``'s Jacobian."""
         work = _Workspace(len(prepared.node_arc_length_m))
-        if warm_start is not None and warm_start.jacobian.shape == (kernels.UNKNOWNS, kernels.UNKNOWNS):
+        if _seeds_kernel(warm_start):
             reference = (warm_start.tip_rotation_in_base.copy() if predicted_tip_turn_rad is None
                          else kernels.turned(warm_start.tip_rotation_in_base, predicted_tip_turn_rad))
             jacobian = warm_start.jacobian.copy()
@@ -348,6 +361,103 @@ class ShootingModel:
             raise ConvergenceError(f"{self.name} model: the shooting Jacobian is singular or a shot diverged "
                                    "at this solution; no sensitivity")
         return columns, nominal.with_jacobian(jacobian)
+
+    def tip_wrench_columns_batch(self, template: PreparedProblem, jet_forces_n: np.ndarray,
+                                 nominals: Sequence[Solution], components: np.ndarray,
+                                 steps: np.ndarray) -> tuple[np.ndarray, list[Solution]]:
+        """`tip_wrench_columns` at the solutions ``nominals`` of ``template`` under rows of
+        other jet forces ((k, 3), N), in one kernel call: (k, 6, len(components)) columns
+        and the seeds. Needs a packing the jets alone change (`shares_packing`)."""
+        count = len(jet_forces_n)
+        jacobians = np.empty((count, kernels.UNKNOWNS, kernels.UNKNOWNS))
+        columns = np.empty((count, 6, len(components)))
+        references = np.array([nominal.rotations_in_base[-1] for nominal in nominals])
+        if kernels.tip_wrench_sensitivity_batch(self.kind, self.resolution, references, template.profile,
+                                                _tips(template, jet_forces_n), template.base, template.beta,
+                                                components, steps, template.length_m, jacobians, columns) < count:
+            raise ConvergenceError(f"{self.name} model: the shooting Jacobian is singular or a shot diverged "
+                                   "at one of these solutions; no sensitivity")
+        return columns, [nominal.with_jacobian(jacobian) for nominal, jacobian in zip(nominals, jacobians)]
+
+    def solve_batch(self, jet_forces_n: np.ndarray, params: ModelParameters,
+                    warm_starts: Sequence[Solution | None], seed: Solution | None = None, *,
+                    along_path: bool = False) -> list[Solution]:
+        """Equilibria for rows of jet forces ((k, 3), N) under one set of parameters: row
+        i is ``solve(jet_forces_n[i], params, warm_start=...)`` from ``warm_starts[i]``
+        or, where that is None, from row i - 1's solution (row 0: ``seed``), bit for
+        bit; with ``along_path`` row i - 1's solution (row 0: ``seed``) is also its
+        ``previous=`` (path state). The warm solves of a run of rows share one kernel
+        call (`kernels.solve_batch`) instead of each paying its own Python set-up, which
+        is most of a warm solve's time in a calibration. A row the warm solve does not
+        finish, or with nothing to start from, takes `solve`'s whole path (cold start,
+        ramping); so does every row of a problem whose packing changes with the jets or
+        along the path (`shares_packing`)."""
+        jets = np.asarray(jet_forces_n, dtype=float)
+        if jets.ndim != 2 or jets.shape[1] != 3 or len(warm_starts) != len(jets):
+            raise ValueError(f"jet_forces_n must be (k, 3) with one warm start per row, got shape {jets.shape} "
+                             f"and {len(warm_starts)} warm starts")
+        if not np.all(np.isfinite(jets)):
+            raise ValueError("jet_forces_n must be finite")
+        solutions: list[Solution] = []
+        if not len(jets):
+            return solutions
+        template = self.prepare(jets[0], params)
+        shared = self.shares_packing(template)
+        previous = seed
+        while len(solutions) < len(jets):
+            row = len(solutions)
+            start = warm_starts[row] if warm_starts[row] is not None else previous
+            # Rows from here whose own warm start (if any) can seed the kernel.
+            end = row + 1
+            while end < len(jets) and (warm_starts[end] is None or _seeds_kernel(warm_starts[end])):
+                end += 1
+            if not shared or not _seeds_kernel(start):
+                previous = self.solve(jets[row], params, previous=previous if along_path else None,
+                                      warm_start=start)
+                solutions.append(previous)
+                continue
+            solved = self._solve_run(template, jets[row:end], [start, *warm_starts[row + 1:end]])
+            solutions.extend(solved)
+            if len(solved) < end - row:
+                # The kernel stopped at this row: the full path, from the same start.
+                failed = len(solutions)
+                if failed > row:
+                    start = warm_starts[failed] if warm_starts[failed] is not None else solutions[-1]
+                solutions.append(self.solve(jets[failed], params, warm_start=start))
+            previous = solutions[-1]
+        return solutions
+
+    def _solve_run(self, template: PreparedProblem, jets: np.ndarray,
+                   warm_starts: Sequence[Solution | None]) -> list[Solution]:
+        """One `kernels.solve_batch` call over rows of jets; the first row must have a warm
+        start. Returns the solutions up to the first row that did not converge."""
+        count = len(jets)
+        tips = _tips(template, jets)
+        references = np.empty((count, kernels.UNKNOWNS, kernels.UNKNOWNS))
+        jacobians = np.empty((count, kernels.UNKNOWNS, kernels.UNKNOWNS))
+        seeded = np.zeros(count, dtype=bool)
+        for row, start in enumerate(warm_starts):
+            if start is not None:
+                references[row] = start.rotations_in_base[-1]
+                jacobians[row] = start.jacobian
+                seeded[row] = True
+        nodes = len(template.node_arc_length_m)
+        nodes_p = np.empty((count, nodes, 3))
+        nodes_r = np.empty((count, nodes, 3, 3))
+        base_wrench = np.empty((count, 6))
+        clamp_rotation = np.empty((count, 3))
+        info = np.empty((count, 4))
+        solved = kernels.solve_batch(self.kind, self.resolution, references, jacobians, seeded, template.profile,
+                                     tips, template.base, template.beta, self.tolerance, self.max_iterations,
+                                     template.length_m, template.wrench_scale, nodes_p, nodes_r, base_wrench,
+                                     clamp_rotation, info)
+        problem = template.problem
+        clamp = clamp_rotation if template.compliant_clamp else None
+        return [Solution(self.name, tips[row, kernels.TIP_JETS:kernels.TIP_JETS + 3], template.node_arc_length_m,
+                         nodes_p[row], nodes_r[row], base_wrench[row], _NO_ROTATION if clamp is None else clamp[row],
+                         problem.base_sensor_mounting, problem.tip_sensor_mounting, int(info[row, 1]),
+                         float(info[row, 2]), jacobians[row], problem.base_sensor_offset_m)
+                for row in range(solved)]
 
     def _ramp(self, prepared: PreparedProblem, stages: int,
               work: "_Workspace") -> tuple[Solution | None, np.ndarray | None]:
@@ -399,6 +509,18 @@ class ShootingModel:
             problem.tip_sensor_mounting, int(work.info[1]), float(work.info[2]), jacobian,
             problem.base_sensor_offset_m,
         )
+
+
+def _tips(template: PreparedProblem, jet_forces_n: np.ndarray) -> np.ndarray:
+    """(k, TIP_SIZE): ``template``'s tip loads under each row of jet forces (N)."""
+    tips = np.repeat(template.tip[np.newaxis], len(jet_forces_n), axis=0)
+    tips[:, kernels.TIP_JETS:kernels.TIP_JETS + 3] = jet_forces_n
+    return tips
+
+
+def _seeds_kernel(solution: Solution | None) -> bool:
+    """Whether a solution can start a warm solve: it carries the solver's matrix."""
+    return solution is not None and solution.jacobian.shape == (kernels.UNKNOWNS, kernels.UNKNOWNS)
 
 
 _NO_ROTATION = np.zeros(3)

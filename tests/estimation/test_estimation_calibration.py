@@ -166,11 +166,18 @@ class FoldingCosserat(CosseratModel):
         super().__init__()
         self.unsolvable_e0_pa = unsolvable_e0_pa
 
-    def solve(self, jet_forces_n, params, previous=None, warm_start=None):
+    def _refuse_in_band(self, params):
         low, high = self.unsolvable_e0_pa
         if low < params.rod.youngs_modulus_base_pa < high:
             raise ConvergenceError(f"{self.name} model did not converge (test band)")
+
+    def solve(self, jet_forces_n, params, previous=None, warm_start=None):
+        self._refuse_in_band(params)
         return super().solve(jet_forces_n, params, previous=previous, warm_start=warm_start)
+
+    def solve_batch(self, jet_forces_n, params, warm_starts, seed=None, *, along_path=False):
+        self._refuse_in_band(params)
+        return super().solve_batch(jet_forces_n, params, warm_starts, seed, along_path=along_path)
 
 
 def test_a_trial_step_the_model_cannot_solve_is_shortened_not_fatal():

@@ -184,3 +184,94 @@ def test_prb_equilibrium_satisfies_eq_16_with_explicit_jacobians(stiffness_ratio
         root = np.sqrt(stiffness_ratio)
         elastic = np.array([stiffness * root, stiffness / root, torsion]) * theta
         np.testing.assert_allclose(elastic, torque, rtol=1e-6, atol=1e-12)
+
+
+def _same_solutions(batch, loop):
+    assert len(batch) == len(loop)
+    for got, expected in zip(batch, loop):
+        np.testing.assert_array_equal(got.positions_in_base_m, expected.positions_in_base_m)
+        np.testing.assert_array_equal(got.rotations_in_base, expected.rotations_in_base)
+        np.testing.assert_array_equal(got.base_wrench_in_base, expected.base_wrench_in_base)
+        np.testing.assert_array_equal(got.base_rotation_vector_rad, expected.base_rotation_vector_rad)
+        np.testing.assert_array_equal(got.jacobian, expected.jacobian)
+        np.testing.assert_array_equal(got.jet_forces_n, expected.jet_forces_n)
+        assert (got.iterations, got.residual) == (expected.iterations, expected.residual)
+
+
+@pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=IDS)
+def test_a_batch_of_solves_is_the_loop_of_single_solves_bit_for_bit(model_type):
+    model = model_type()
+    rng = np.random.default_rng(7)
+    jets = rng.uniform(0.0, 0.12, (12, 3))
+    earlier = [model.solve(row * 0.97, ACROSS) for row in jets]
+    # Rows 0, 4 and 9 have their own warm start; the others start from the row before.
+    warm_starts = [earlier[k] if k in (0, 4, 9) else None for k in range(len(jets))]
+    loop, previous = [], None
+    for row, start in zip(jets, warm_starts):
+        previous = model.solve(row, ACROSS, warm_start=start if start is not None else previous)
+        loop.append(previous)
+    _same_solutions(model.solve_batch(jets, ACROSS, warm_starts), loop)
+    # A seed starts row 0 like any other solution before it would.
+    seed = model.solve(jets[0] * 1.05, ACROSS)
+    _same_solutions(model.solve_batch(jets[:3], ACROSS, [None] * 3, seed),
+                    [first := model.solve(jets[0], ACROSS, warm_start=seed),
+                     second := model.solve(jets[1], ACROSS, warm_start=first),
+                     model.solve(jets[2], ACROSS, warm_start=second)])
+
+
+@pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=IDS)
+def test_a_row_the_batched_warm_solve_cannot_finish_takes_the_full_path(model_type):
+    # With 8 iterations the warm solve cannot jump from jet 1 to a large jet 2 command;
+    # the full path (cold start, ramping) can, and the rows after it resume the batch.
+    model = model_type(max_iterations=8)
+    jets = np.array([[0.05, 0.0, 0.0], [0.052, 0.0, 0.0], [0.0, 0.2, 0.05], [0.0, 0.21, 0.05]])
+    seed = model.solve(jets[0] * 0.9, ACROSS)
+    loop, previous = [], seed
+    for row in jets:
+        previous = model.solve(row, ACROSS, warm_start=previous)
+        loop.append(previous)
+    single_solves = []
+    solve = model.solve
+
+    def counted(*args, **kwargs):
+        single_solves.append(args[0])
+        return solve(*args, **kwargs)
+
+    model.solve = counted
+    _same_solutions(model.solve_batch(jets, ACROSS, [None] * len(jets), seed), loop)
+    assert [list(row) for row in single_solves] == [[0.0, 0.2, 0.05]]
+
+
+def test_a_batch_along_a_path_with_state_carries_each_rows_clamp_state():
+    names = ("base_hysteresis.compliance_rad_per_nm", "base_hysteresis.play_rad")
+    params = with_parameters(ACROSS, dict(zip(names, (50.0, 0.02))))
+    model = CosseratModel(effects=("gravity", "base_hysteresis"))
+    jets = np.array([[f, 0.0, 0.0] for f in (0.0, 0.05, 0.1, 0.05, 0.0)])
+    loop, previous = [], None
+    for row in jets:
+        previous = model.solve(row, params, previous=previous)
+        loop.append(previous)
+    _same_solutions(model.solve_batch(jets, params, [None] * len(jets), along_path=True), loop)
+    # Without the path every row starts from a clamp at rest, and the loop's way back differs.
+    independent = model.solve_batch(jets, params, [None] * len(jets))
+    assert np.linalg.norm(independent[3].base_rotation_vector_rad - loop[3].base_rotation_vector_rad) > 1e-4
+
+
+def test_a_batch_names_its_bad_input():
+    with pytest.raises(ValueError, match="jet_forces_n must be"):
+        CosseratModel().solve_batch(np.zeros((2, 2)), ACROSS, [None, None])
+    with pytest.raises(ValueError, match="one warm start per row"):
+        CosseratModel().solve_batch(np.zeros((2, 3)), ACROSS, [None])
+    with pytest.raises(ValueError, match="finite"):
+        CosseratModel().solve_batch(np.array([[0.1, np.nan, 0.0]]), ACROSS, [None])
+    assert CosseratModel().solve_batch(np.zeros((0, 3)), ACROSS, []) == []
+
+
+def test_stacked_tip_sensor_readings_are_each_solutions_own():
+    from hydrojet_bench.effects.setup import BaseSensorMounting
+
+    model = CosseratModel(effects=("gravity", BaseSensorMounting()))
+    params = with_parameters(ACROSS, {"base_sensor_mounting.rx_rad": 0.1, "base_sensor_mounting.rz_rad": -0.2})
+    solutions = [model.solve([f, 0.02, 0.0], params) for f in (0.0, 0.05, 0.1)]
+    np.testing.assert_allclose(shooting.tip_sensors_in_base_sensor(solutions),
+                               [solution.tip_sensor_in_base_sensor() for solution in solutions], atol=1e-15)
