@@ -46,7 +46,8 @@ from ..data.dataset import Dataset
 from ..effects import CALIBRATION_POSES, SWEEPS, Effect, EffectParameter, identifying_rows
 from ..errors import ConvergenceError
 from ..geometry import body_rotation_error, matrix_from_quat
-from ..models.shooting import ShootingModel, Solution, tip_sensors_in_base_sensor
+from ..models.shooting import (ShootingModel, Solution, tip_sensor_positions_in_base_sensor_m,
+                               tip_sensors_in_base_sensor)
 from ..params import DISTURBANCE_NAMES, PARAMETER_NAMES, ModelParameters, get_parameter, with_parameters
 from ..sensitivity import (DEFAULT_RELATIVE_STEP, disturbance_columns_batch, effect_parameter, parameter_scale,
                            parameter_steps)
@@ -180,7 +181,7 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         rows = np.empty((len(solutions), rows_per_pose))
         rows[:, :3] = body_rotation_error(tip_sensors_in_base_sensor(solutions), measured)
         if measured_positions is not None:
-            positions = np.array([s.tip_sensor_position_in_base_sensor_m(o) for s, o in zip(solutions, offsets)])
+            positions = tip_sensor_positions_in_base_sensor_m(solutions, offsets)
             rows[:, 3:] = position_weight_rad_per_m * (positions - measured_positions)
         return rows
 
@@ -246,17 +247,18 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
                     components, steps)
                 for index, seed in zip(indices, run_seeds):
                     seeds[index] = seed
-            for row, index in enumerate(fitted_indices):
-                solution, columns = solutions[index], by_pose[row]
-                rows = np.empty((rows_per_pose, len(batched)))
-                # d(log(R_pred^T R_meas))/dzeta = -(tip sensor mounting)^T S_rot, to first order.
-                rows[:3] = -solution.tip_sensor_mounting.T @ columns[3:]
-                if use_positions:
-                    # A point o of the tip frame moves by R_tip (v + omega x o) for a body twist (v, omega).
-                    moved = columns[:3] + np.cross(columns[3:], offsets[row], axis=0)
-                    rows[3:] = position_weight_rad_per_m * (
-                        solution.base_sensor_mounting.T @ solution.tip_rotation_in_base @ moved)
-                matrix[row * rows_per_pose:(row + 1) * rows_per_pose, batched] = rows
+            fitted_solutions = [solutions[index] for index in fitted_indices]
+            block = np.empty((len(fitted_indices), rows_per_pose, len(batched)))
+            # d(log(R_pred^T R_meas))/dzeta = -(tip sensor mounting)^T S_rot, to first order.
+            tip_mounting = np.array([solution.tip_sensor_mounting for solution in fitted_solutions])
+            block[:, :3] = -np.swapaxes(tip_mounting, 1, 2) @ by_pose[:, 3:]
+            if use_positions:
+                # A point o of the tip frame moves by R_tip (v + omega x o) for a body twist (v, omega).
+                moved = by_pose[:, :3] + np.cross(by_pose[:, 3:], offsets[:, :, np.newaxis], axis=1)
+                base_mounting = np.array([solution.base_sensor_mounting for solution in fitted_solutions])
+                tip_rotation = np.array([solution.rotations_in_base[-1] for solution in fitted_solutions])
+                block[:, 3:] = position_weight_rad_per_m * (np.swapaxes(base_mounting, 1, 2) @ tip_rotation @ moved)
+            matrix[:, batched] = block.reshape(len(fitted_indices) * rows_per_pose, len(batched))
         # Other parameters may change the shape, the sensor mountings or both: forward
         # differences of the residual itself, one parameter at a time over all poses (which
         # then share one packed problem), with the steps `sensitivity` uses.

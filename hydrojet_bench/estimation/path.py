@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from itertools import groupby
 
 import numpy as np
 
@@ -141,11 +142,21 @@ class PathPredictor:
         frame (w, x, y, z), gravity in the base frame then (m/s^2) and, when measured, the
         tip position in the base frame (m). Raises `ConvergenceError` when the model does
         not converge on it."""
+        solution = self.model.solve(jet_forces_n, self._params_under(gravity_in_base_m_s2),
+                                    previous=self._previous_ref)
+        return self._record(solution, jet_forces_n, measured_tip_in_base, gravity_in_base_m_s2,
+                            measured_tip_position_in_base_m)
+
+    def _params_under(self, gravity_in_base_m_s2: np.ndarray) -> ModelParameters:
         gravity = tuple(gravity_in_base_m_s2)
         if gravity != self._ref_params.gravity_in_base_m_s2:
             # Kept while gravity stays the same, so the model can reuse its packed problem.
             self._ref_params = replace(self.params, gravity_in_base_m_s2=gravity)
-        solution = self.model.solve(jet_forces_n, self._ref_params, previous=self._previous_ref)
+        return self._ref_params
+
+    def _record(self, solution: Solution, jet_forces_n: np.ndarray, measured_tip_in_base: np.ndarray,
+                gravity_in_base_m_s2: np.ndarray, measured_tip_position_in_base_m: np.ndarray | None) -> StepPrediction:
+        """The step's prediction from Ref.'s solution, after the online update if any."""
         self._previous_ref = solution
         ref = _prediction(REF, solution, np.array(self.params.disturbance.moment_nm), measured_tip_in_base,
                           measured_tip_position_in_base_m)
@@ -166,8 +177,19 @@ class PathPredictor:
         gravity = steps.gravity_in_base_m_s2() if gravity_in_base_m_s2 is None else np.asarray(gravity_in_base_m_s2)
         measured = steps.tip_orientation_in_base()
         positions = steps.tip_position_in_base_m()
-        return [self.step(steps.jet_forces_n[row], measured[row], gravity[row],
-                          None if positions is None else positions[row]) for row in range(len(steps))]
+        if self._estimator is not None:
+            return [self.step(steps.jet_forces_n[row], measured[row], gravity[row],
+                              None if positions is None else positions[row]) for row in range(len(steps))]
+        # Ref. alone: the solves of each run of steps under one gravity are one batch.
+        records: list[StepPrediction] = []
+        for _, run in groupby(range(len(steps)), key=lambda row: tuple(gravity[row])):
+            run = list(run)
+            solutions = self.model.solve_batch(steps.jet_forces_n[run], self._params_under(gravity[run[0]]),
+                                               [None] * len(run), self._previous_ref, along_path=True)
+            records.extend(self._record(solution, steps.jet_forces_n[row], measured[row], gravity[row],
+                                        None if positions is None else positions[row])
+                           for row, solution in zip(run, solutions))
+        return records
 
 
 def _prediction(method: str, solution: Solution, moment_nm: np.ndarray, measured: np.ndarray,

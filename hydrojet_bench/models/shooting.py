@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import ClassVar
 
 import numpy as np
@@ -122,8 +123,7 @@ class Solution:
         An unstated base mounting M turns the base sensor about its own origin o (clamp
         frame), so the clamp frame read through the profile's mounting is the true one
         turned by M about o: a point p of the true base frame reads M^T (p - o) + o."""
-        point = self.tip_position_in_base_m + self.tip_rotation_in_base @ np.asarray(offset_in_tip_m, dtype=float)
-        return self.base_sensor_mounting.T @ (point - self.base_sensor_offset_m) + self.base_sensor_offset_m
+        return tip_sensor_positions_in_base_sensor_m([self], np.asarray(offset_in_tip_m, dtype=float)[np.newaxis])[0]
 
     def tip_sensor_quaternion(self) -> np.ndarray:
         """`tip_sensor_in_base_sensor` as a quaternion (w, x, y, z)."""
@@ -137,6 +137,19 @@ def tip_sensors_in_base_sensor(solutions: Sequence[Solution]) -> np.ndarray:
     tip = np.array([solution.rotations_in_base[-1] for solution in solutions])
     tip_mounting = np.array([solution.tip_sensor_mounting for solution in solutions])
     return np.swapaxes(base, 1, 2) @ (tip @ tip_mounting)
+
+
+def tip_sensor_positions_in_base_sensor_m(solutions: Sequence[Solution], offsets_in_tip_m: np.ndarray) -> np.ndarray:
+    """(k, 3), m: `Solution.tip_sensor_position_in_base_sensor_m` of each solution at its
+    row of ``offsets_in_tip_m`` ((k, 3), tip frame, m), as stacked products."""
+    if not len(solutions):
+        return np.empty((0, 3))
+    tip = np.array([solution.positions_in_base_m[-1] for solution in solutions])
+    tip_rotation = np.array([solution.rotations_in_base[-1] for solution in solutions])
+    base = np.array([solution.base_sensor_mounting for solution in solutions])
+    origin = np.array([solution.base_sensor_offset_m for solution in solutions])
+    point = tip + (tip_rotation @ offsets_in_tip_m[:, :, np.newaxis])[:, :, 0]
+    return (np.swapaxes(base, 1, 2) @ (point - origin)[:, :, np.newaxis])[:, :, 0] + origin
 
 
 # slots: a warm solve builds one per call (`with_jets`), and a slots instance costs half.
@@ -224,7 +237,7 @@ class ShootingModel:
 
     def sample_arc_length_m(self, length_m: float) -> np.ndarray:
         """Where the problem's profiles are sampled: 2 * resolution + 1 points, base to tip."""
-        return np.linspace(0.0, length_m, 2 * self.resolution + 1)
+        return _even_grid_m(2 * self.resolution + 1, length_m)
 
     def node_arc_length_m(self, length_m: float) -> np.ndarray:
         raise NotImplementedError
@@ -407,15 +420,15 @@ class ShootingModel:
         while len(solutions) < len(jets):
             row = len(solutions)
             start = warm_starts[row] if warm_starts[row] is not None else previous
-            # Rows from here whose own warm start (if any) can seed the kernel.
-            end = row + 1
-            while end < len(jets) and (warm_starts[end] is None or _seeds_kernel(warm_starts[end])):
-                end += 1
             if not shared or not _seeds_kernel(start):
                 previous = self.solve(jets[row], params, previous=previous if along_path else None,
                                       warm_start=start)
                 solutions.append(previous)
                 continue
+            # Rows from here whose own warm start (if any) can seed the kernel.
+            end = row + 1
+            while end < len(jets) and (warm_starts[end] is None or _seeds_kernel(warm_starts[end])):
+                end += 1
             solved = self._solve_run(template, jets[row:end], [start, *warm_starts[row + 1:end]])
             solutions.extend(solved)
             if len(solved) < end - row:
@@ -511,6 +524,24 @@ class ShootingModel:
         )
 
 
+@lru_cache(maxsize=16)
+def _even_grid_m(points: int, length_m: float) -> np.ndarray:
+    """``points`` evenly spaced arc lengths from 0 to ``length_m`` (m), shared and read-only:
+    every packing asks for two, and a diagnosis packs thousands of problems."""
+    grid = np.linspace(0.0, length_m, points)
+    grid.flags.writeable = False
+    return grid
+
+
+@lru_cache(maxsize=16)
+def _prb_nodes_m(joints: int, length_m: float) -> np.ndarray:
+    """Arc lengths (m) of the PRB chain's nodes: the clamp, each joint at the middle of
+    its segment, the tip; shared and read-only like `_even_grid_m`."""
+    nodes = np.concatenate([[0.0], (np.arange(joints) + 0.5) / joints, [1.0]]) * length_m
+    nodes.flags.writeable = False
+    return nodes
+
+
 def _tips(template: PreparedProblem, jet_forces_n: np.ndarray) -> np.ndarray:
     """(k, TIP_SIZE): ``template``'s tip loads under each row of jet forces (N)."""
     tips = np.repeat(template.tip[np.newaxis], len(jet_forces_n), axis=0)
@@ -548,7 +579,7 @@ class CosseratModel(ShootingModel):
     name = "cosserat"
 
     def node_arc_length_m(self, length_m: float) -> np.ndarray:
-        return np.linspace(0.0, length_m, self.resolution + 1)
+        return _even_grid_m(self.resolution + 1, length_m)
 
 
 class PrbModel(ShootingModel):
@@ -590,5 +621,4 @@ class PrbModel(ShootingModel):
         return f"PrbModel(effects={[e.name for e in self.effects]}, links={self.links})"
 
     def node_arc_length_m(self, length_m: float) -> np.ndarray:
-        joints = self.resolution
-        return np.concatenate([[0.0], (np.arange(joints) + 0.5) / joints, [1.0]]) * length_m
+        return _prb_nodes_m(self.resolution, length_m)

@@ -75,7 +75,7 @@ from ...estimation.calibration import DEFAULT_NAMES, CalibrationPose, calibrate,
 from ...estimation.path import REF, PathPredictor, Predictions
 from ...geometry import body_rotation_error, matrix_from_quat
 from ...models import make_model
-from ...models.shooting import PrbModel, ShootingModel
+from ...models.shooting import PrbModel, ShootingModel, tip_sensor_positions_in_base_sensor_m
 from ...params import ModelParameters, with_parameters
 from ..compare import compare
 from ..metrics import ErrorSummary
@@ -206,7 +206,8 @@ def predict_path(model: ShootingModel, params: ModelParameters, steps: Dataset,
     (`Solution.tip_sensor_position_in_base_sensor_m`)."""
     offset = np.array(tip_sensor_offset_in_tip_m(steps))
     path = PathPredictor(model, params).predict(steps, gravity_in_base_m_s2)
-    sensor_positions = np.array([step.ref.solution.tip_sensor_position_in_base_sensor_m(offset) for step in path])
+    sensor_positions = tip_sensor_positions_in_base_sensor_m([step.ref.solution for step in path],
+                                                             np.tile(offset, (len(path), 1)))
     return Predictions.along(path, REF), sensor_positions
 
 
