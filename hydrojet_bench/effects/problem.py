@@ -60,6 +60,9 @@ class RodProblem:
     # Base clamp: rotation = play(compliance * base moment); zero compliance is rigid.
     base_compliance_rad_per_nm: np.ndarray = field(default_factory=lambda: np.zeros(3))
     base_play_rad: float = 0.0
+    # Where the clamp stopped at the previous solve (rad): the path state the solver
+    # carries. Effects must not read it: a model reuses its packing along a path and
+    # only swaps this in (`ShootingModel.prepare`).
     previous_base_rotation_vector_rad: np.ndarray = field(default_factory=lambda: np.zeros(3))
     # Measurement: sensor orientation = body orientation @ mounting rotation.
     base_sensor_mounting: np.ndarray = field(default_factory=lambda: np.eye(3))

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..data.dataset import Dataset
 from ..geometry import position_error_mm, quat_from_matrix, rotation_angle_deg
-from ..models.shooting import ShootingModel, Solution
+from ..models.shooting import ShootingModel, Solution, tip_sensors_in_base_sensor
 from ..params import ModelParameters
 from .online import OnlineDisturbanceEstimator, OnlineSettings
 
@@ -144,8 +144,18 @@ class PathPredictor:
         not converge on it."""
         solution = self.model.solve(jet_forces_n, self._params_under(gravity_in_base_m_s2),
                                     previous=self._previous_ref)
-        return self._record(solution, jet_forces_n, measured_tip_in_base, gravity_in_base_m_s2,
-                            measured_tip_position_in_base_m)
+        self._previous_ref = solution
+        positions = None if measured_tip_position_in_base_m is None else measured_tip_position_in_base_m[np.newaxis]
+        ref, = _predictions(REF, [solution], np.array([self.params.disturbance.moment_nm]),
+                            np.asarray(measured_tip_in_base)[np.newaxis], positions)
+        online = before = iterations = None
+        if self._estimator is not None:
+            result = self._estimator.update(jet_forces_n, measured_tip_in_base,
+                                            gravity_in_base_m_s2=gravity_in_base_m_s2)
+            online, = _predictions(ONLINE, [result.solution], result.disturbance_moment_nm[np.newaxis],
+                                   np.asarray(measured_tip_in_base)[np.newaxis], positions)
+            before, iterations = result.error_before_deg, result.iterations
+        return self._next_record(ref, online, before, iterations)
 
     def _params_under(self, gravity_in_base_m_s2: np.ndarray) -> ModelParameters:
         gravity = tuple(gravity_in_base_m_s2)
@@ -154,20 +164,10 @@ class PathPredictor:
             self._ref_params = replace(self.params, gravity_in_base_m_s2=gravity)
         return self._ref_params
 
-    def _record(self, solution: Solution, jet_forces_n: np.ndarray, measured_tip_in_base: np.ndarray,
-                gravity_in_base_m_s2: np.ndarray, measured_tip_position_in_base_m: np.ndarray | None) -> StepPrediction:
-        """The step's prediction from Ref.'s solution, after the online update if any."""
-        self._previous_ref = solution
-        ref = _prediction(REF, solution, np.array(self.params.disturbance.moment_nm), measured_tip_in_base,
-                          measured_tip_position_in_base_m)
-        online = before = iterations = None
-        if self._estimator is not None:
-            result = self._estimator.update(jet_forces_n, measured_tip_in_base,
-                                            gravity_in_base_m_s2=gravity_in_base_m_s2)
-            online = _prediction(ONLINE, result.solution, result.disturbance_moment_nm, measured_tip_in_base,
-                                 measured_tip_position_in_base_m)
-            before, iterations = result.error_before_deg, result.iterations
-        record = StepPrediction(self._count, ref, online, np.array(self.params.disturbance.force_n), before, iterations)
+    def _next_record(self, ref: Prediction, online: Prediction | None = None, error_before_deg: float | None = None,
+                     iterations: int | None = None) -> StepPrediction:
+        record = StepPrediction(self._count, ref, online, np.array(self.params.disturbance.force_n), error_before_deg,
+                                iterations)
         self._count += 1
         return record
 
@@ -180,22 +180,29 @@ class PathPredictor:
         if self._estimator is not None:
             return [self.step(steps.jet_forces_n[row], measured[row], gravity[row],
                               None if positions is None else positions[row]) for row in range(len(steps))]
-        # Ref. alone: the solves of each run of steps under one gravity are one batch.
+        # Ref. alone: each run of steps under one gravity is one batch of solves.
         records: list[StepPrediction] = []
         for _, run in groupby(range(len(steps)), key=lambda row: tuple(gravity[row])):
             run = list(run)
             solutions = self.model.solve_batch(steps.jet_forces_n[run], self._params_under(gravity[run[0]]),
                                                [None] * len(run), self._previous_ref, along_path=True)
-            records.extend(self._record(solution, steps.jet_forces_n[row], measured[row], gravity[row],
-                                        None if positions is None else positions[row])
-                           for row, solution in zip(run, solutions))
+            self._previous_ref = solutions[-1]
+            moments = np.tile(self.params.disturbance.moment_nm, (len(run), 1))
+            records.extend(map(self._next_record, _predictions(REF, solutions, moments, measured[run],
+                                                               None if positions is None else positions[run])))
         return records
 
 
-def _prediction(method: str, solution: Solution, moment_nm: np.ndarray, measured: np.ndarray,
-                measured_position_m: np.ndarray | None) -> Prediction:
-    predicted = quat_from_matrix(solution.tip_sensor_in_base_sensor())
-    position = solution.tip_position_in_base_m
-    return Prediction(method, predicted, position, solution.bend_angle_deg, moment_nm,
-                      orientation_error_deg(predicted, measured), step_position_error_mm(position, measured_position_m),
-                      solution)
+def _predictions(method: str, solutions: Sequence[Solution], moments_nm: np.ndarray, measured: np.ndarray,
+                 measured_positions_m: np.ndarray | None) -> list[Prediction]:
+    """One prediction per solution against its row of ``measured`` (k, 4) and, when given,
+    ``measured_positions_m`` (k, 3, m); ``moments_nm`` (k, 3): the w_d|m each used."""
+    predicted = quat_from_matrix(tip_sensors_in_base_sensor(solutions))
+    positions = np.array([solution.positions_in_base_m[-1] for solution in solutions])
+    tip_cosines = np.array([solution.rotations_in_base[-1, 2, 2] for solution in solutions])
+    bends = np.degrees(np.arccos(np.clip(tip_cosines, -1.0, 1.0))).tolist()
+    errors = rotation_angle_deg(predicted, measured).tolist()
+    position_errors = ([None] * len(solutions) if measured_positions_m is None
+                       else position_error_mm(positions, measured_positions_m).tolist())
+    return [Prediction(method, predicted[k], positions[k], bends[k], moments_nm[k], errors[k], position_errors[k],
+                       solution) for k, solution in enumerate(solutions)]

@@ -177,15 +177,25 @@ class PreparedProblem:
     # the clamp's rotation, else a shared zero.
     compliant_clamp: bool
 
-    def _replace_tip(self, tip: np.ndarray) -> "PreparedProblem":
-        return PreparedProblem(self.problem, self.profile, tip, self.base, self.beta, self.length_m,
-                               self.force_scale_n, self.moment_scale_nm, self.node_arc_length_m,
+    def _replace_tip(self, tip: np.ndarray, base: np.ndarray | None = None) -> "PreparedProblem":
+        return PreparedProblem(self.problem, self.profile, tip, self.base if base is None else base, self.beta,
+                               self.length_m, self.force_scale_n, self.moment_scale_nm, self.node_arc_length_m,
                                self.wrench_scale, self.compliant_clamp)
 
     def with_jets(self, jet_forces_n: np.ndarray) -> "PreparedProblem":
         tip = self.tip.copy()
         tip[kernels.TIP_JETS:kernels.TIP_JETS + 3] = jet_forces_n
         return self._replace_tip(tip)
+
+    def with_path_state(self, jet_forces_n: np.ndarray, previous: Solution | None) -> "PreparedProblem":
+        """Same problem under other jets (N), the clamp starting from where ``previous``
+        left it (at rest without one): what `ShootingModel.build_problem` would pack."""
+        tip = self.tip.copy()
+        tip[kernels.TIP_JETS:kernels.TIP_JETS + 3] = jet_forces_n
+        base = self.base.copy()
+        base[kernels.BASE_PREVIOUS_ROTATION:kernels.BASE_PREVIOUS_ROTATION + 3] = (
+            0.0 if previous is None else previous.base_rotation_vector_rad)
+        return self._replace_tip(tip, base)
 
     def with_disturbance_moment(self, moment_nm: np.ndarray) -> "PreparedProblem":
         """Same problem with w_d's moment (tip frame, N m) replaced; follower moments that
@@ -255,14 +265,17 @@ class ShootingModel:
 
     def prepare(self, jet_forces_n: Sequence[float], params: ModelParameters,
                 previous: Solution | None = None) -> PreparedProblem:
-        """Pack the problem for the kernel. The last packing is reused when only the jet
-        forces changed, unless an effect reads them or the clamp depends on the path:
-        rebuilding costs more than a warm solve."""
+        """Pack the problem for the kernel. The last packing is reused under the same
+        parameters unless an effect reads the jet forces: rebuilding costs more than a
+        warm solve. A clamp with path state then takes ``previous``'s rotation, which no
+        effect reads (`RodProblem.previous_base_rotation_vector_rad`)."""
         jets = np.asarray(jet_forces_n, dtype=float)
         if jets.shape != (3,) or not all(map(math.isfinite, jets.tolist())):
             raise ValueError(f"jet_forces_n must be 3 finite numbers, got {jet_forces_n!r}")
         cached = self._cached
-        if cached is not None and cached.problem.params is params and self.shares_packing(cached):
+        if cached is not None and cached.problem.params is params and not self._uses_actuation:
+            if cached.problem.depends_on_previous_state:
+                return cached.with_path_state(jets, previous)
             return cached.with_jets(jets)
         prepared = self._pack(self.build_problem(jets, params, previous))
         self._cached = prepared
