@@ -133,6 +133,8 @@ class Solution:
 def tip_sensors_in_base_sensor(solutions: Sequence[Solution]) -> np.ndarray:
     """(k, 3, 3): `Solution.tip_sensor_in_base_sensor` of each solution, as stacked products
     (a calibration asks for thousands; one call each cost more than its solve's set-up)."""
+    if not len(solutions):
+        return np.empty((0, 3, 3))
     base = np.array([solution.base_sensor_mounting for solution in solutions])
     tip = np.array([solution.rotations_in_base[-1] for solution in solutions])
     tip_mounting = np.array([solution.tip_sensor_mounting for solution in solutions])

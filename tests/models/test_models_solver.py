@@ -270,11 +270,22 @@ def test_a_batch_names_its_bad_input():
 def test_stacked_tip_sensor_readings_are_each_solutions_own():
     from hydrojet_bench.effects.setup import BaseSensorMounting
 
-    model = CosseratModel(effects=("gravity", BaseSensorMounting()))
+    model = CosseratModel(effects=("gravity", BaseSensorMounting((0.014, 0.0, 0.0))))
     params = with_parameters(ACROSS, {"base_sensor_mounting.rx_rad": 0.1, "base_sensor_mounting.rz_rad": -0.2})
     solutions = [model.solve([f, 0.02, 0.0], params) for f in (0.0, 0.05, 0.1)]
     np.testing.assert_allclose(shooting.tip_sensors_in_base_sensor(solutions),
                                [solution.tip_sensor_in_base_sensor() for solution in solutions], atol=1e-15)
+    # A point o of the tip frame, read through the base sensor turned by M about its origin c.
+    offsets = np.array([[0.0, 0.0, 0.0], [0.001, -0.002, 0.003], [0.0, 0.004, 0.0]])
+    expected = [solution.base_sensor_mounting.T @ (solution.tip_position_in_base_m
+                                                   + solution.tip_rotation_in_base @ offset
+                                                   - solution.base_sensor_offset_m) + solution.base_sensor_offset_m
+                for solution, offset in zip(solutions, offsets)]
+    np.testing.assert_allclose(shooting.tip_sensor_positions_in_base_sensor_m(solutions, offsets), expected,
+                               atol=1e-15)
+    assert np.linalg.norm(solutions[0].base_sensor_offset_m) > 0.01
+    assert shooting.tip_sensors_in_base_sensor([]).shape == (0, 3, 3)
+    assert shooting.tip_sensor_positions_in_base_sensor_m([], np.empty((0, 3))).shape == (0, 3)
 
 
 @pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=IDS)
