@@ -273,7 +273,7 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
                 perturbed = solve_poses(range(len(poses)), perturbed_params, solutions, True)
                 perturbed = [perturbed[index] for index in fitted_indices]
             else:
-                # Without path state a pose's solve does not depend on the one before it.
+                # Path state is followed only along_path: no pose here depends on the one before it.
                 perturbed = solve_poses(fitted_indices, perturbed_params, [seeds[index] for index in fitted_indices],
                                         False)
             matrix[:, column] = (residual_rows(perturbed).ravel() - residuals) / step

@@ -145,7 +145,8 @@ class PathPredictor:
         solution = self.model.solve(jet_forces_n, self._params_under(gravity_in_base_m_s2),
                                     previous=self._previous_ref)
         self._previous_ref = solution
-        positions = None if measured_tip_position_in_base_m is None else measured_tip_position_in_base_m[np.newaxis]
+        positions = (None if measured_tip_position_in_base_m is None
+                     else np.asarray(measured_tip_position_in_base_m, dtype=float)[np.newaxis])
         ref, = _predictions(REF, [solution], np.array([self.params.disturbance.moment_nm]),
                             np.asarray(measured_tip_in_base)[np.newaxis], positions)
         online = before = iterations = None
