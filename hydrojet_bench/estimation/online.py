@@ -34,7 +34,7 @@ from ..params import DISTURBANCE_MOMENT_NAMES, PARAMETER_SCALES, ModelParameters
 from ..sensitivity import DEFAULT_RELATIVE_STEP, disturbance_columns
 
 if TYPE_CHECKING:
-    from ..models.shooting import ShootingModel, Solution
+    from ..models.shooting import PreparedProblem, ShootingModel, Solution
 
 
 @dataclass(frozen=True)
@@ -100,30 +100,68 @@ class OnlineDisturbanceEstimator:
         measured = np.asarray(measured_tip_in_base_sensor, dtype=float)
         if measured.shape == (4,):
             measured = matrix_from_quat(measured)
+        if measured.shape != (3, 3):
+            raise ValueError(f"measured_tip_in_base_sensor must be a 3x3 rotation or a quaternion (w, x, y, z), "
+                             f"got shape {measured.shape}")
         if gravity_in_base_m_s2 is not None and tuple(gravity_in_base_m_s2) != self.params.gravity_in_base_m_s2:
             self.params = replace(self.params, gravity_in_base_m_s2=tuple(gravity_in_base_m_s2))
         budget = self.settings.iterations if iterations is None else iterations
         packed = self.model.prepare(jet_forces_n, self.params, self._previous)
-        prepared = packed.with_disturbance_moment(self._moment)
+        step = self._update_in_kernel(packed, measured, budget)
+        if step is None:
+            step = self._update(packed, measured, budget)
+        self._moment = step.disturbance_moment_nm.copy()
+        self._previous = step.solution
+        return step
+
+    def _update_in_kernel(self, packed: PreparedProblem, measured: np.ndarray, budget: int) -> EstimateStep | None:
+        """`_update` in one kernel call (`_update_kernel`), bit for bit: the Python around
+        each solve and sensitivity costs more than they do. None when the last step left
+        nothing to start from or a solve inside did not finish (`_update` then takes the
+        model's whole solve path)."""
+        previous = self._previous
+        if previous is None or previous.jacobian.shape != (kernels.UNKNOWNS, kernels.UNKNOWNS):
+            return None
+        model = self.model
+        work = model.workspace(packed)
+        moment = self._moment.copy()
+        jacobian = previous.jacobian.copy()
+        errors_deg = np.empty(2)
+        done = _update_kernel(model.kind, model.resolution, model.tolerance, model.max_iterations, packed.profile,
+                              packed.tip, packed.base, packed.beta, packed.length_m, packed.wrench_scale,
+                              packed.moment_scale_nm, np.array(self.params.disturbance.moment_nm), moment, _MOMENT_SCALES,
+                              DEFAULT_RELATIVE_STEP, previous.rotations_in_base[-1].copy(), jacobian,
+                              np.ascontiguousarray(measured),
+                              packed.problem.base_sensor_mounting, packed.problem.tip_sensor_mounting, budget,
+                              self.settings.tolerance_deg, self.settings.damping, self.settings.gain,
+                              work.nodes_p, work.nodes_r, work.base_wrench, work.clamp_rotation, work.info, errors_deg)
+        if done < 0:
+            return None
+        return EstimateStep(float(errors_deg[0]), float(errors_deg[1]), int(done), moment,
+                            model.solution_from(packed, jacobian, work))
+
+    def _update(self, packed: PreparedProblem, measured: np.ndarray, budget: int) -> EstimateStep:
+        """One update through the model's own solve path (cold start, ramping if need be)."""
+        moment = self._moment
+        prepared = packed.with_disturbance_moment(moment)
         solution = self.model.solve_prepared(prepared, self._previous)
         omega = np.empty(3)
         error_before = error = self._error_deg(solution, measured, omega)
         done = 0
+        change = np.empty(3)
+        turn = np.empty(3)
         while done < budget and error > self.settings.tolerance_deg:
-            steps = DEFAULT_RELATIVE_STEP * np.maximum(np.abs(self._moment), _MOMENT_SCALES)
+            steps = DEFAULT_RELATIVE_STEP * np.maximum(np.abs(moment), _MOMENT_SCALES)
             columns, seed = disturbance_columns(self.model, prepared, solution, _MOMENT_COMPONENTS, steps)
-            matrix = np.ascontiguousarray(columns[3:])
-            # omega_des is in the tip sensor's frame; the sensitivity in the rod tip's.
-            change = _damped_least_squares(matrix, solution.tip_sensor_mounting @ omega, self.settings.damping,
-                                           self.settings.gain)
-            self._moment = self._moment + change
-            prepared = packed.with_disturbance_moment(self._moment)
+            _moment_change(np.ascontiguousarray(columns[3:]), omega, solution.tip_sensor_mounting,
+                           self.settings.damping, self.settings.gain, change, turn)
+            moment = moment + change
+            prepared = packed.with_disturbance_moment(moment)
             # The same columns predict where the tip turns: the solve starts there.
-            solution = self.model.solve_prepared(prepared, seed, predicted_tip_turn_rad=matrix @ change)
+            solution = self.model.solve_prepared(prepared, seed, predicted_tip_turn_rad=turn)
             error = self._error_deg(solution, measured, omega)
             done += 1
-        self._previous = solution
-        return EstimateStep(error_before, error, done, self._moment.copy(), solution)
+        return EstimateStep(error_before, error, done, moment.copy(), solution)
 
     @staticmethod
     def _error_deg(solution: Solution, measured: np.ndarray, omega: np.ndarray) -> float:
@@ -135,11 +173,82 @@ class OnlineDisturbanceEstimator:
 @njit(cache=True, nogil=True)
 def _damped_least_squares(matrix, omega, damping, gain):
     """gain S^T (S S^T + mu I)^-1 omega with mu = damping * the largest eigenvalue of S S^T
-    (eq. 4 with the damping's sign corrected, see the module docstring); one kernel
-    call, as numpy's small-matrix calls cost more than the solve."""
+    (eq. 4 with the damping's sign corrected, see the module docstring)."""
     gram = matrix @ matrix.T
     mu = damping * np.linalg.eigvalsh(gram)[-1]
     return gain * (matrix.T @ np.linalg.solve(gram + mu * np.eye(gram.shape[0]), omega))
+
+
+@njit(cache=True, nogil=True)
+def _moment_change(matrix, omega, tip_sensor_mounting, damping, gain, change, turn):
+    """The moment correction (N m, tip frame) for the error ``omega`` (rad, tip sensor
+    frame) through the rotation rows ``matrix`` (3x3, rad per N m, rod tip frame) into
+    ``change``, and where it turns the tip (``matrix @ change``, rad) into ``turn``.
+    Shared by both update paths so they agree bit for bit."""
+    error_in_tip = np.empty(3)
+    for i in range(3):
+        error_in_tip[i] = (tip_sensor_mounting[i, 0] * omega[0] + tip_sensor_mounting[i, 1] * omega[1]
+                           + tip_sensor_mounting[i, 2] * omega[2])
+    change[:] = _damped_least_squares(matrix, error_in_tip, damping, gain)
+    for i in range(3):
+        turn[i] = matrix[i, 0] * change[0] + matrix[i, 1] * change[1] + matrix[i, 2] * change[2]
+
+
+@njit(cache=True, nogil=True)
+def _update_kernel(kind, resolution, tolerance, max_iterations, profile, packed_tip, base, beta, length, wrench_scale,
+                   moment_scale, params_moment, moment, moment_scales, relative_step, reference, jacobian, measured,
+                   base_sensor_mounting, tip_sensor_mounting, budget, tolerance_deg, damping, gain,
+                   nodes_p, nodes_r, base_wrench, clamp_rotation, info, errors_deg):
+    """`OnlineDisturbanceEstimator._update` from a warm start (``reference``, ``jacobian``:
+    the last shape's tip frame and solver matrix) in one call: solve, then up to
+    ``budget`` times sensitivity, correction and solve again. ``moment`` (N m) is
+    updated in place; the last solve's shape is left in the node arrays and its matrix
+    in ``jacobian``; ``errors_deg`` gets the error before and after. Returns the number
+    of corrections, or -1 when a solve or a sensitivity did not finish."""
+    tip = packed_tip.copy()
+    for i in range(3):
+        tip[kernels.TIP_FOLLOWER_MOMENT + i] = (packed_tip[kernels.TIP_FOLLOWER_MOMENT + i]
+                                                + (moment[i] - params_moment[i]) / moment_scale)
+    kernels.solve(kind, resolution, reference, jacobian, True, profile, tip, base, beta, 1.0, tolerance,
+                  max_iterations, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation, info)
+    if info[0] != kernels.CONVERGED:
+        return -1
+    tip_frame = nodes_r[nodes_r.shape[0] - 1]
+    omega = np.empty(3)
+    error = math.degrees(kernels.relative_rotation_vector(
+        kernels.sensor_rotation(base_sensor_mounting, tip_frame, tip_sensor_mounting), measured, omega))
+    errors_deg[0] = error
+    components = np.array([3, 4, 5], dtype=np.int64)
+    steps = np.empty(3)
+    columns = np.empty((6, 3))
+    matrix = np.empty((3, 3))
+    change = np.empty(3)
+    turn = np.empty(3)
+    done = 0
+    while done < budget and error > tolerance_deg:
+        for i in range(3):
+            steps[i] = relative_step * max(abs(moment[i]), moment_scales[i]) / moment_scale
+        if not kernels.tip_wrench_sensitivity(kind, resolution, tip_frame, profile, tip, base, beta, components,
+                                              steps, length, jacobian, columns):
+            return -1
+        for i in range(3):
+            for j in range(3):
+                matrix[i, j] = columns[3 + i, j] / moment_scale
+        _moment_change(matrix, omega, tip_sensor_mounting, damping, gain, change, turn)
+        for i in range(3):
+            moment[i] = moment[i] + change[i]
+            tip[kernels.TIP_FOLLOWER_MOMENT + i] = (packed_tip[kernels.TIP_FOLLOWER_MOMENT + i]
+                                                    + (moment[i] - params_moment[i]) / moment_scale)
+        start = kernels.turned(tip_frame, turn)
+        kernels.solve(kind, resolution, start, jacobian, True, profile, tip, base, beta, 1.0, tolerance,
+                      max_iterations, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation, info)
+        if info[0] != kernels.CONVERGED:
+            return -1
+        error = math.degrees(kernels.relative_rotation_vector(
+            kernels.sensor_rotation(base_sensor_mounting, tip_frame, tip_sensor_mounting), measured, omega))
+        done += 1
+    errors_deg[1] = error
+    return done
 
 
 _MOMENT_COMPONENTS = np.array([3, 4, 5], dtype=np.int64)

@@ -348,16 +348,16 @@ class ShootingModel:
         """Solve a packed problem; see `solve`. ``predicted_tip_turn_rad``: how far the tip
         is expected to turn from ``warm_start``'s (a rotation vector in its tip frame, from
         a sensitivity): the solver then starts there, with ``warm_start``'s Jacobian."""
-        work = _Workspace(len(prepared.node_arc_length_m))
+        work = self.workspace(prepared)
         if _seeds_kernel(warm_start):
             reference = (warm_start.tip_rotation_in_base.copy() if predicted_tip_turn_rad is None
                          else kernels.turned(warm_start.tip_rotation_in_base, predicted_tip_turn_rad))
             jacobian = warm_start.jacobian.copy()
             if self._run(prepared, reference, jacobian, True, 1.0, work):
-                return self._solution(prepared, jacobian, work)
+                return self.solution_from(prepared, jacobian, work)
         jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
         if self._run(prepared, np.eye(3), jacobian, False, 1.0, work):
-            solution = self._solution(prepared, jacobian, work)
+            solution = self.solution_from(prepared, jacobian, work)
             if solution.bend_angle_deg <= RAMP_BEND_DEG:
                 return solution
         nearest = [] if warm_start is None else [warm_start.tip_rotation_in_base]
@@ -488,7 +488,7 @@ class ShootingModel:
                 for row in range(solved)]
 
     def _ramp(self, prepared: PreparedProblem, stages: int,
-              work: "_Workspace") -> tuple[Solution | None, np.ndarray | None]:
+              work: Workspace) -> tuple[Solution | None, np.ndarray | None]:
         """Continuation: scale every load from 1/stages up to 1, each stage seeded by the
         last. Returns the solution, or None and the tip orientation of the last solved
         stage (None if none was)."""
@@ -502,9 +502,9 @@ class ShootingModel:
                 return None, last_solved
             last_solved = reference.copy()
             have_jacobian = True
-        return self._solution(prepared, jacobian, work), None
+        return self.solution_from(prepared, jacobian, work), None
 
-    def _snap(self, prepared: PreparedProblem, nearest: Sequence[np.ndarray], work: "_Workspace") -> Solution | None:
+    def _snap(self, prepared: PreparedProblem, nearest: Sequence[np.ndarray], work: Workspace) -> Solution | None:
         """Full load, started from each of the ``nearest`` solved tip orientations turned
         further about its own bend axis (`SNAP_TURNS_DEG`): the branch past a fold."""
         jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
@@ -517,18 +517,25 @@ class ShootingModel:
                 # The bend's rotation vector is the same in the tip frame as in the base's.
                 reference = kernels.turned(rotation, bend * (math.radians(turn_deg) / angle))
                 if self._run(prepared, reference, jacobian, False, 1.0, work):
-                    return self._solution(prepared, jacobian, work)
+                    return self.solution_from(prepared, jacobian, work)
         return None
 
     def _run(self, prepared: PreparedProblem, reference: np.ndarray, jacobian: np.ndarray,
-             have_jacobian: bool, load_scale: float, work: "_Workspace") -> bool:
+             have_jacobian: bool, load_scale: float, work: Workspace) -> bool:
         kernels.solve(self.kind, self.resolution, reference, jacobian, have_jacobian, prepared.profile,
                       prepared.tip, prepared.base, prepared.beta, load_scale, self.tolerance,
                       self.max_iterations, prepared.length_m, prepared.wrench_scale, work.nodes_p, work.nodes_r,
                       work.base_wrench, work.clamp_rotation, work.info)
         return work.info[0] == kernels.CONVERGED
 
-    def _solution(self, prepared: PreparedProblem, jacobian: np.ndarray, work: "_Workspace") -> Solution:
+    @staticmethod
+    def workspace(prepared: PreparedProblem) -> Workspace:
+        """Fresh output buffers for one solve of ``prepared``."""
+        return Workspace(len(prepared.node_arc_length_m))
+
+    def solution_from(self, prepared: PreparedProblem, jacobian: np.ndarray, work: Workspace) -> Solution:
+        """The `Solution` a converged kernel solve of ``prepared`` left in ``work``, with
+        its solver matrix ``jacobian`` (both kept, not copied)."""
         problem = prepared.problem
         return Solution(
             self.name, prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].copy(), prepared.node_arc_length_m,
@@ -573,7 +580,7 @@ _NO_ROTATION = np.zeros(3)
 _NO_ROTATION.flags.writeable = False
 
 
-class _Workspace:
+class Workspace:
     """Output buffers of one solve (the kernel writes the shape and the clamp's wrench and
     rotation; the `Solution` keeps them)."""
 

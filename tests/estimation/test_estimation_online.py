@@ -90,3 +90,58 @@ def test_quaternion_measurements_and_tolerance_stop():
 def test_settings_are_validated(field, value):
     with pytest.raises(ValueError, match=f"estimator.{field}"):
         OnlineSettings(**{field: value})
+
+
+def _python_path_only(estimator, monkeypatch):
+    """The estimator without its one-kernel update: every step through the model's solves."""
+    monkeypatch.setattr(estimator, "_update_in_kernel", lambda *args: None)
+    return estimator
+
+
+ROD_WITH_EVERYTHING = (("gravity", "nonlinear_elasticity", "base_hysteresis", "sensor_mounting"),
+                       {"nonlinear_elasticity.beta_m2": 2e-4, "base_hysteresis.compliance_rad_per_nm": 0.5,
+                        "base_hysteresis.play_rad": 0.01, "sensor_mounting.rx_rad": 0.05,
+                        "sensor_mounting.rz_rad": -0.1})
+
+
+@pytest.mark.parametrize("model_class", [CosseratModel, PrbModel], ids=["cosserat", "prb"])
+@pytest.mark.parametrize("rod", [(("gravity",), {}), ROD_WITH_EVERYTHING], ids=["plain", "everything"])
+@pytest.mark.parametrize("settings", [OnlineSettings(), OnlineSettings(iterations=3, tolerance_deg=0.0)],
+                         ids=["default", "three_iterations"])
+def test_the_one_kernel_update_is_the_python_update_bit_for_bit(model_class, rod, settings, monkeypatch):
+    # A random walk of jets with a noisy measurement each step, and a jump the warm solve
+    # inside the kernel cannot finish in 8 iterations (the update then takes the model's
+    # whole solve path): estimates, errors and shapes all equal, not close.
+    from hydrojet_bench.estimation import online
+    from hydrojet_bench.geometry import so3_exp
+    from hydrojet_bench.params import with_parameters
+
+    effects, values = rod
+    params = with_parameters(PARAMS, values)
+    model = model_class(effects=effects, max_iterations=8)
+    outcomes = []
+    kernel = online._update_kernel
+    monkeypatch.setattr(online, "_update_kernel", lambda *args: outcomes.append(kernel(*args)) or outcomes[-1])
+    fast = OnlineDisturbanceEstimator(model, params, settings)
+    slow = _python_path_only(OnlineDisturbanceEstimator(model, params, settings), monkeypatch)
+    rng = np.random.default_rng(7)
+    jets = np.zeros(3)
+    for step in range(14):
+        jets = np.array([0.1, 0.0, 0.03]) if step == 4 else np.clip(jets + rng.normal(0.0, 0.006, 3), 0.0, 0.12)
+        measured = (model_class().solve(jets, params).tip_sensor_in_base_sensor()
+                    @ so3_exp(rng.normal(0.0, np.radians(1.0), 3)))
+        a, b = fast.update(jets, measured), slow.update(jets, measured)
+        assert (a.error_before_deg, a.error_after_deg, a.iterations) == (b.error_before_deg, b.error_after_deg,
+                                                                         b.iterations)
+        np.testing.assert_array_equal(a.disturbance_moment_nm, b.disturbance_moment_nm)
+        for field in ("positions_in_base_m", "rotations_in_base", "base_wrench_in_base", "base_rotation_vector_rad",
+                      "jacobian"):
+            np.testing.assert_array_equal(getattr(a.solution, field), getattr(b.solution, field), err_msg=field)
+        assert (a.solution.iterations, a.solution.residual) == (b.solution.iterations, b.solution.residual)
+    assert -1 in outcomes and max(outcomes) >= 1  # both the fallback and the kernel ran
+
+
+def test_a_measurement_of_the_wrong_shape_is_refused():
+    estimator = OnlineDisturbanceEstimator(CosseratModel(), PARAMS)
+    with pytest.raises(ValueError, match=r"3x3 rotation or a quaternion .* shape \(3,\)"):
+        estimator.update([0.05, 0.0, 0.0], [1.0, 0.0, 0.0])
