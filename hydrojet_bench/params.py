@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import numpy as np
 
@@ -143,13 +144,15 @@ class JetLayout:
         return actuation_matrix(self.ring_angle_rad)
 
 
+@lru_cache(maxsize=64)
 def actuation_matrix(ring_angle_rad: float) -> np.ndarray:
     """Eq. 5's A for a jet ring rotated by ``ring_angle_rad`` about the tip z axis, padded
-    with a zero z row."""
+    with a zero z row; shared and read-only (every packing of a problem asks for it)."""
     angles = _JET1_ANGLE_RAD - _JET_SPACING_RAD * np.arange(JET_COUNT) + ring_angle_rad
     matrix = np.zeros((3, JET_COUNT))
     matrix[0] = np.cos(angles)
     matrix[1] = np.sin(angles)
+    matrix.flags.writeable = False
     return matrix
 
 

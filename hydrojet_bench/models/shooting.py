@@ -28,7 +28,7 @@ import numpy as np
 from ..effects import Effect, effect_values, load_effect
 from ..errors import ConvergenceError
 from ..geometry import quat_from_matrix, se3, so3_log
-from ..params import ModelParameters
+from ..params import ModelParameters, actuation_matrix
 from . import kernels
 from ..effects.problem import RodProblem
 
@@ -294,39 +294,41 @@ class ShootingModel:
         reference_stiffness = params.rod.youngs_modulus_base_pa * params.rod.second_moment_m4
         moment_scale = reference_stiffness / length
         force_scale = moment_scale / length
-        profile = np.empty((len(problem.arc_length_m), kernels.PROFILE_COLUMNS))
-        profile[:, kernels.STIFFNESS] = problem.bending_stiffness_x_nm2 / reference_stiffness
-        profile[:, kernels.STIFFNESS + 1] = problem.bending_stiffness_y_nm2 / reference_stiffness
-        profile[:, kernels.STIFFNESS + 2] = problem.torsional_stiffness_nm2 / reference_stiffness
-        profile[:, kernels.INTRINSIC_CURVATURE:kernels.INTRINSIC_CURVATURE + 3] = (
-            problem.intrinsic_curvature_in_body_1_m * length)
-        profile[:, kernels.DISTRIBUTED_FORCE:kernels.DISTRIBUTED_FORCE + 3] = (
-            problem.distributed_force_in_base_n_m * length / force_scale)
-        profile[:, kernels.DISTRIBUTED_MOMENT:kernels.DISTRIBUTED_MOMENT + 3] = (
-            problem.distributed_moment_in_body_nm_m * length / moment_scale)
-        if not np.all(np.isfinite(profile[:, :kernels.COMPLIANCE])) or np.any(profile[:, :3] <= 0.0):
+        samples = len(problem.arc_length_m)
+        profile = np.empty((samples, kernels.PROFILE_COLUMNS))
+        tip = np.empty(kernels.TIP_SIZE)
+        base = np.empty(kernels.BASE_SIZE)
+        distributed_moment = _floats(problem.distributed_moment_in_body_nm_m, (samples, 3),
+                                     "distributed_moment_in_body_nm_m")
+        status = kernels.pack(
+            _floats(problem.bending_stiffness_x_nm2, (samples,), "bending_stiffness_x_nm2"),
+            _floats(problem.bending_stiffness_y_nm2, (samples,), "bending_stiffness_y_nm2"),
+            _floats(problem.torsional_stiffness_nm2, (samples,), "torsional_stiffness_nm2"),
+            _floats(problem.intrinsic_curvature_in_body_1_m, (samples, 3), "intrinsic_curvature_in_body_1_m"),
+            _floats(problem.distributed_force_in_base_n_m, (samples, 3), "distributed_force_in_base_n_m"),
+            distributed_moment,
+            _floats(problem.tip_follower_force_in_tip_n, (3,), "tip_follower_force_in_tip_n"),
+            _floats(problem.tip_follower_moment_in_tip_nm, (3,), "tip_follower_moment_in_tip_nm"),
+            _floats(problem.tip_dead_force_in_base_n, (3,), "tip_dead_force_in_base_n"),
+            _floats(problem.tip_dead_moment_in_base_nm, (3,), "tip_dead_moment_in_base_nm"),
+            _floats(problem.tip_dead_force_arm_m_n, (3, 3), "tip_dead_force_arm_m_n"),
+            actuation_matrix(float(problem.jet_ring_angle_rad)), _floats(problem.jet_gains, (3,), "jet_gains"),
+            _floats(problem.jet_forces_n, (3,), "jet_forces_n"),
+            _floats(problem.base_compliance_rad_per_nm, (3,), "base_compliance_rad_per_nm"),
+            float(problem.base_play_rad),
+            _floats(problem.previous_base_rotation_vector_rad, (3,), "previous_base_rotation_vector_rad"),
+            reference_stiffness, length, force_scale, moment_scale, profile, tip, base)
+        if status == kernels.BAD_PROFILE:
             raise ValueError("effects produced a non-finite profile or a non-positive stiffness")
-        profile[:, kernels.COMPLIANCE:kernels.COMPLIANCE + 3] = 1.0 / profile[:, kernels.STIFFNESS:kernels.STIFFNESS + 3]
-        tip = np.zeros(kernels.TIP_SIZE)
-        tip[kernels.TIP_FOLLOWER_FORCE:kernels.TIP_FOLLOWER_FORCE + 3] = problem.tip_follower_force_in_tip_n / force_scale
-        tip[kernels.TIP_FOLLOWER_MOMENT:kernels.TIP_FOLLOWER_MOMENT + 3] = problem.tip_follower_moment_in_tip_nm / moment_scale
-        tip[kernels.TIP_DEAD_FORCE:kernels.TIP_DEAD_FORCE + 3] = problem.tip_dead_force_in_base_n / force_scale
-        tip[kernels.TIP_DEAD_MOMENT:kernels.TIP_DEAD_MOMENT + 3] = problem.tip_dead_moment_in_base_nm / moment_scale
-        tip[kernels.TIP_DEAD_ARM:kernels.TIP_DEAD_ARM + 9] = (problem.tip_dead_force_arm_m_n / moment_scale).ravel()
-        tip[kernels.TIP_ACTUATION:kernels.TIP_ACTUATION + 9] = (problem.actuation_matrix() / force_scale).ravel()
-        tip[kernels.TIP_JETS:kernels.TIP_JETS + 3] = problem.jet_forces_n
-        base = np.zeros(kernels.BASE_SIZE)
-        base[kernels.BASE_COMPLIANCE:kernels.BASE_COMPLIANCE + 3] = problem.base_compliance_rad_per_nm * moment_scale
-        base[kernels.BASE_PLAY] = problem.base_play_rad
-        base[kernels.BASE_PREVIOUS_ROTATION:kernels.BASE_PREVIOUS_ROTATION + 3] = problem.previous_base_rotation_vector_rad
-        if not (np.all(np.isfinite(tip)) and np.all(np.isfinite(base))):
+        if status == kernels.BAD_TIP_OR_CLAMP:
             raise ValueError("effects produced a non-finite tip load or clamp parameter")
         # None selects the kernels' plain-rod specialisation (see `kernels`).
-        plain = problem.cubic_stiffening_m2 == 0.0 and not problem.distributed_moment_in_body_nm_m.any()
+        plain = problem.cubic_stiffening_m2 == 0.0 and not distributed_moment.any()
         beta = None if plain else problem.cubic_stiffening_m2 / length**2
         return PreparedProblem(problem, profile, tip, base, beta,
                                length, force_scale, moment_scale, self.node_arc_length_m(length),
-                               np.repeat([force_scale, moment_scale], 3),
+                               np.array((force_scale, force_scale, force_scale, moment_scale, moment_scale,
+                                         moment_scale)),
                                bool(base[kernels.BASE_COMPLIANCE:kernels.BASE_COMPLIANCE + 3].any()))
 
     # --- solving ------------------------------------------------------------------
@@ -562,6 +564,20 @@ def _prb_nodes_m(joints: int, length_m: float) -> np.ndarray:
     nodes = np.concatenate([[0.0], (np.arange(joints) + 0.5) / joints, [1.0]]) * length_m
     nodes.flags.writeable = False
     return nodes
+
+
+def _floats(values, shape: tuple[int, ...], field_name: str) -> np.ndarray:
+    """A `RodProblem` field as the C-contiguous float array of ``shape`` a kernel takes
+    (broadcast if an effect left it a scalar or a row): the kernels index without
+    bounds checks, so a wrong shape is refused here, by name."""
+    array = np.ascontiguousarray(values, dtype=float)
+    if array.shape != shape:
+        try:
+            array = np.ascontiguousarray(np.broadcast_to(array, shape))
+        except ValueError:
+            raise ValueError(f"effects left RodProblem.{field_name} with shape {array.shape}, "
+                             f"expected {shape}") from None
+    return array
 
 
 def _tips(template: PreparedProblem, jet_forces_n: np.ndarray) -> np.ndarray:

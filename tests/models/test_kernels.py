@@ -110,3 +110,75 @@ def test_a_prepared_problem_takes_the_plain_kernel_only_without_cubic_law_and_di
     problem = model.build_problem(jets, ACROSS)
     problem.cubic_stiffening_m2 = 1e-6
     assert model._pack(problem).beta == pytest.approx(1e-6 / ACROSS.rod.length_m ** 2)
+
+
+def _packed_by_numpy(problem, length, force_scale, moment_scale, reference_stiffness):
+    """The packing written as whole-array numpy expressions: the oracle for `kernels.pack`."""
+    profile = np.empty((len(problem.arc_length_m), kernels.PROFILE_COLUMNS))
+    profile[:, kernels.STIFFNESS] = problem.bending_stiffness_x_nm2 / reference_stiffness
+    profile[:, kernels.STIFFNESS + 1] = problem.bending_stiffness_y_nm2 / reference_stiffness
+    profile[:, kernels.STIFFNESS + 2] = problem.torsional_stiffness_nm2 / reference_stiffness
+    profile[:, kernels.INTRINSIC_CURVATURE:kernels.INTRINSIC_CURVATURE + 3] = (
+        problem.intrinsic_curvature_in_body_1_m * length)
+    profile[:, kernels.DISTRIBUTED_FORCE:kernels.DISTRIBUTED_FORCE + 3] = (
+        problem.distributed_force_in_base_n_m * length / force_scale)
+    profile[:, kernels.DISTRIBUTED_MOMENT:kernels.DISTRIBUTED_MOMENT + 3] = (
+        problem.distributed_moment_in_body_nm_m * length / moment_scale)
+    profile[:, kernels.COMPLIANCE:] = 1.0 / profile[:, kernels.STIFFNESS:kernels.STIFFNESS + 3]
+    tip = np.concatenate([problem.tip_follower_force_in_tip_n / force_scale,
+                          problem.tip_follower_moment_in_tip_nm / moment_scale,
+                          problem.tip_dead_force_in_base_n / force_scale,
+                          problem.tip_dead_moment_in_base_nm / moment_scale,
+                          (problem.tip_dead_force_arm_m_n / moment_scale).ravel(),
+                          (problem.actuation_matrix() / force_scale).ravel(), problem.jet_forces_n])
+    base = np.concatenate([problem.base_compliance_rad_per_nm * moment_scale, [problem.base_play_rad],
+                           problem.previous_base_rotation_vector_rad])
+    return profile, tip, base
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_packing_kernel_makes_the_numbers_numpy_makes_for_every_library_effect(seed):
+    from hydrojet_bench.effects import LIBRARY
+    from hydrojet_bench.params import with_parameters
+
+    rng = np.random.default_rng(seed)
+    model = CosseratModel(effects=tuple(LIBRARY), resolution=RESOLUTION)
+    values = {}
+    for effect in model.effects:
+        for parameter in effect.parameters:
+            values[f"{effect.name}.{parameter.name}"] = rng.uniform(parameter.lower, parameter.upper) / 4.0
+    params = with_parameters(ModelParameters(gravity_in_base_m_s2=tuple(rng.normal(0.0, 5.0, 3))), values)
+    problem = model.build_problem(rng.uniform(0.0, 0.12, 3), params)
+    problem.previous_base_rotation_vector_rad = rng.normal(0.0, 0.01, 3)
+    problem.distributed_moment_in_body_nm_m = rng.normal(0.0, 1e-4, (len(problem.arc_length_m), 3))
+    packed = model._pack(problem)
+    expected = _packed_by_numpy(problem, packed.length_m, packed.force_scale_n, packed.moment_scale_nm,
+                                params.rod.youngs_modulus_base_pa * params.rod.second_moment_m4)
+    for name, got, want in zip(("profile", "tip", "base"), (packed.profile, packed.tip, packed.base), expected):
+        np.testing.assert_array_equal(got, want, err_msg=name)
+
+
+def test_a_problem_field_of_the_wrong_shape_is_refused_by_name_and_a_scalar_is_broadcast():
+    model = CosseratModel(resolution=RESOLUTION)
+    problem = model.build_problem([0.05, 0.0, 0.0], ACROSS)
+    problem.torsional_stiffness_nm2 = float(problem.torsional_stiffness_nm2[0])  # an effect setting one value
+    packed = model._pack(problem)
+    assert np.all(packed.profile[:, kernels.STIFFNESS + 2] == packed.profile[0, kernels.STIFFNESS + 2])
+    problem.bending_stiffness_x_nm2 = problem.bending_stiffness_x_nm2[:-1]
+    with pytest.raises(ValueError, match=r"RodProblem.bending_stiffness_x_nm2 with shape \(\d+,\), expected"):
+        model._pack(problem)
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("bending_stiffness_y_nm2", -1.0, "non-positive stiffness"),
+    ("intrinsic_curvature_in_body_1_m", np.nan, "non-finite profile"),
+    ("tip_dead_force_in_base_n", np.inf, "non-finite tip load"),
+    ("base_play_rad", np.nan, "clamp parameter"),
+])
+def test_a_non_finite_or_non_positive_packing_is_refused(field, value, message):
+    model = CosseratModel(resolution=RESOLUTION)
+    problem = model.build_problem([0.05, 0.0, 0.0], ACROSS)
+    current = getattr(problem, field)
+    setattr(problem, field, value if np.isscalar(current) else np.full_like(current, value))
+    with pytest.raises(ValueError, match=message):
+        model._pack(problem)
