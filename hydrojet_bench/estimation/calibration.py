@@ -349,10 +349,10 @@ _STOP_REASONS = {
 def calibration_poses(steps: Dataset) -> list[CalibrationPose]:
     """The dataset's rows as calibration poses (measured tip in base frame, gravity per row,
     positions when present)."""
-    orientations = steps.tip_orientation_in_base()
+    rotations = matrix_from_quat(steps.tip_orientation_in_base())
     positions = steps.tip_position_in_base_m()
     gravity = steps.gravity_in_base_m_s2()
-    return [CalibrationPose(steps.jet_forces_n[i], matrix_from_quat(orientations[i]), tuple(gravity[i]),
+    return [CalibrationPose(steps.jet_forces_n[i], rotations[i], tuple(gravity[i]),
                             None if positions is None else positions[i]) for i in range(len(steps))]
 
 
