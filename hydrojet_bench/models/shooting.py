@@ -17,6 +17,7 @@ shot may land on another equilibrium branch. When nothing converges it raises
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -482,12 +483,16 @@ class ShootingModel:
                                      template.length_m, template.wrench_scale, nodes_p, nodes_r, base_wrench,
                                      clamp_rotation, info)
         problem = template.problem
-        clamp = clamp_rotation if template.compliant_clamp else None
-        return [Solution(self.name, tips[row, kernels.TIP_JETS:kernels.TIP_JETS + 3], template.node_arc_length_m,
-                         nodes_p[row], nodes_r[row], base_wrench[row], _NO_ROTATION if clamp is None else clamp[row],
-                         problem.base_sensor_mounting, problem.tip_sensor_mounting, int(info[row, 1]),
-                         float(info[row, 2]), jacobians[row], problem.base_sensor_offset_m)
-                for row in range(solved)]
+        arc_length, base_mounting, tip_mounting, offset = (template.node_arc_length_m, problem.base_sensor_mounting,
+                                                           problem.tip_sensor_mounting, problem.base_sensor_offset_m)
+        # Iterating over the arrays makes each row's views in C: a diagnosis builds some
+        # 100,000 of these, and indexing row by row cost half of that again.
+        clamps = clamp_rotation[:solved] if template.compliant_clamp else itertools.repeat(_NO_ROTATION)
+        return [Solution(self.name, jets, arc_length, positions, rotations, wrench, clamp, base_mounting, tip_mounting,
+                         int(status[1]), status[2], jacobian, offset)
+                for jets, positions, rotations, wrench, clamp, status, jacobian in zip(
+                    tips[:solved, kernels.TIP_JETS:kernels.TIP_JETS + 3], nodes_p[:solved], nodes_r[:solved],
+                    base_wrench[:solved], clamps, info[:solved].tolist(), jacobians[:solved])]
 
     def _ramp(self, prepared: PreparedProblem, stages: int,
               work: Workspace) -> tuple[Solution | None, np.ndarray | None]:
