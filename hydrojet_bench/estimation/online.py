@@ -129,12 +129,12 @@ class OnlineDisturbanceEstimator:
         errors_deg = np.empty(2)
         done = _update_kernel(model.kind, model.resolution, model.tolerance, model.max_iterations, packed.profile,
                               packed.tip, packed.base, packed.beta, packed.length_m, packed.wrench_scale,
-                              packed.moment_scale_nm, np.array(self.params.disturbance.moment_nm), moment, _MOMENT_SCALES,
-                              DEFAULT_RELATIVE_STEP, previous.rotations_in_base[-1].copy(), jacobian,
-                              np.ascontiguousarray(measured),
-                              packed.problem.base_sensor_mounting, packed.problem.tip_sensor_mounting, budget,
-                              self.settings.tolerance_deg, self.settings.damping, self.settings.gain,
-                              work.nodes_p, work.nodes_r, work.base_wrench, work.clamp_rotation, work.info, errors_deg)
+                              packed.moment_scale_nm, np.array(self.params.disturbance.moment_nm), moment,
+                              previous.rotations_in_base[-1].copy(), jacobian,
+                              np.ascontiguousarray(measured), packed.problem.base_sensor_mounting,
+                              packed.problem.tip_sensor_mounting, budget, self.settings.tolerance_deg,
+                              self.settings.damping, self.settings.gain, work.nodes_p, work.nodes_r, work.base_wrench,
+                              work.clamp_rotation, work.info, errors_deg)
         if done < 0:
             return None
         return EstimateStep(float(errors_deg[0]), float(errors_deg[1]), int(done), moment,
@@ -161,7 +161,7 @@ class OnlineDisturbanceEstimator:
             solution = self.model.solve_prepared(prepared, seed, predicted_tip_turn_rad=turn)
             error = self._error_deg(solution, measured, omega)
             done += 1
-        return EstimateStep(error_before, error, done, moment.copy(), solution)
+        return EstimateStep(error_before, error, done, moment, solution)
 
     @staticmethod
     def _error_deg(solution: Solution, measured: np.ndarray, omega: np.ndarray) -> float:
@@ -184,7 +184,9 @@ def _moment_change(matrix, omega, tip_sensor_mounting, damping, gain, change, tu
     """The moment correction (N m, tip frame) for the error ``omega`` (rad, tip sensor
     frame) through the rotation rows ``matrix`` (3x3, rad per N m, rod tip frame) into
     ``change``, and where it turns the tip (``matrix @ change``, rad) into ``turn``.
-    Shared by both update paths so they agree bit for bit."""
+    omega_des is measured in the tip sensor's frame, the sensitivity in the rod tip's:
+    the mounting takes one to the other. Shared by both update paths so they agree bit
+    for bit."""
     error_in_tip = np.empty(3)
     for i in range(3):
         error_in_tip[i] = (tip_sensor_mounting[i, 0] * omega[0] + tip_sensor_mounting[i, 1] * omega[1]
@@ -196,7 +198,7 @@ def _moment_change(matrix, omega, tip_sensor_mounting, damping, gain, change, tu
 
 @njit(cache=True, nogil=True)
 def _update_kernel(kind, resolution, tolerance, max_iterations, profile, packed_tip, base, beta, length, wrench_scale,
-                   moment_scale, params_moment, moment, moment_scales, relative_step, reference, jacobian, measured,
+                   moment_scale, params_moment, moment, reference, jacobian, measured,
                    base_sensor_mounting, tip_sensor_mounting, budget, tolerance_deg, damping, gain,
                    nodes_p, nodes_r, base_wrench, clamp_rotation, info, errors_deg):
     """`OnlineDisturbanceEstimator._update` from a warm start (``reference``, ``jacobian``:
@@ -218,7 +220,6 @@ def _update_kernel(kind, resolution, tolerance, max_iterations, profile, packed_
     error = math.degrees(kernels.relative_rotation_vector(
         kernels.sensor_rotation(base_sensor_mounting, tip_frame, tip_sensor_mounting), measured, omega))
     errors_deg[0] = error
-    components = np.array([3, 4, 5], dtype=np.int64)
     steps = np.empty(3)
     columns = np.empty((6, 3))
     matrix = np.empty((3, 3))
@@ -227,9 +228,9 @@ def _update_kernel(kind, resolution, tolerance, max_iterations, profile, packed_
     done = 0
     while done < budget and error > tolerance_deg:
         for i in range(3):
-            steps[i] = relative_step * max(abs(moment[i]), moment_scales[i]) / moment_scale
-        if not kernels.tip_wrench_sensitivity(kind, resolution, tip_frame, profile, tip, base, beta, components,
-                                              steps, length, jacobian, columns):
+            steps[i] = DEFAULT_RELATIVE_STEP * max(abs(moment[i]), _MOMENT_SCALES[i]) / moment_scale
+        if not kernels.tip_wrench_sensitivity(kind, resolution, tip_frame, profile, tip, base, beta,
+                                              _MOMENT_COMPONENTS, steps, length, jacobian, columns):
             return -1
         for i in range(3):
             for j in range(3):
