@@ -232,9 +232,14 @@ PLAUSIBLE_RANGES: dict[str, tuple[float, float, str]] = {
 def check_plausible(name: str, value: float, field_name: str | None = None) -> None:
     """ValueError naming ``field_name`` (default: the flat ``name``), the value and the
     unit when ``value`` is outside ``PLAUSIBLE_RANGES[name]``."""
-    low, high, unit = PLAUSIBLE_RANGES[name]
+    check_within(field_name or name, value, *PLAUSIBLE_RANGES[name])
+
+
+def check_within(field_name: str, value: float, low: float, high: float, unit: str) -> None:
+    """ValueError naming ``field_name``, the value and the unit when ``value`` is outside
+    [low, high]: a unit slip or a typo rather than a rig."""
     if not low <= value <= high:
-        raise ValueError(f"{field_name or name} = {value:g} {unit} is outside the plausible range "
+        raise ValueError(f"{field_name} = {value:g} {unit} is outside the plausible range "
                          f"{low:g} .. {high:g} {unit} (a unit slip?)")
 DISTURBANCE_MOMENT_NAMES: tuple[str, ...] = ("wd_mx", "wd_my", "wd_mz")
 DISTURBANCE_NAMES: tuple[str, ...] = ("wd_fx", "wd_fy", "wd_fz") + DISTURBANCE_MOMENT_NAMES

@@ -45,7 +45,8 @@ from drivers.valve.calibration import JetCalibration
 from drivers.valve.protocol import DUTY_MAX_PERMILLE
 
 from ..models import MODELS
-from ..params import JET_COUNT, MAX_PLAUSIBLE_JET_FORCE_N, CapsuleParameters, JetLayout, RodParameters, check_plausible
+from ..params import (JET_COUNT, MAX_PLAUSIBLE_JET_FORCE_N, CapsuleParameters, JetLayout, RodParameters,
+                      check_plausible, check_within)
 
 # Device transports in [transports]: "sim" serves an in-process emulator on the digital
 # twin, "pty" the same emulator on a pseudo-terminal (the serial code path).
@@ -123,6 +124,7 @@ class GravityTable(Table, kw_only=True):
     def __post_init__(self) -> None:
         if not math.hypot(*self.in_tracker_m_s2) > 0:
             raise ValueError("in_tracker_m_s2 must not be zero")
+        check_within("in_tracker_m_s2 (its length)", math.hypot(*self.in_tracker_m_s2), 0.0, 100.0, "m/s^2")
 
 
 class BaseTable(Table, kw_only=True):
@@ -166,6 +168,9 @@ class RodTable(Table, kw_only=True):
         for name, field_name in (("E0", "youngs_modulus_base_pa"), ("EL", "youngs_modulus_tip_pa"),
                                  ("L", "length_m")):
             check_plausible(name, getattr(self, field_name), field_name)
+        # Past these the rod's weight overflows or vanishes: foam to tungsten, 0.5 mm to 10 cm.
+        check_within("radius_m", self.radius_m, 5e-4, 0.1, "m")
+        check_within("density_kg_m3", self.density_kg_m3, 100.0, 25000.0, "kg/m^3")
 
     def parameters(self) -> RodParameters:
         return RodParameters(**msgspec.structs.asdict(self))
@@ -174,6 +179,11 @@ class RodTable(Table, kw_only=True):
 class CapsuleTable(Table, kw_only=True):
     mass_kg: NonNegative = _CAPSULE.mass_kg  # camera, jets and sensor included
     center_of_mass_in_tip_m: Vector3 = _CAPSULE.center_of_mass_in_tip_m  # tip frame, m
+
+    def __post_init__(self) -> None:
+        check_within("mass_kg", self.mass_kg, 0.0, 1.0, "kg")
+        for axis, value in zip("xyz", self.center_of_mass_in_tip_m):
+            check_within(f"center_of_mass_in_tip_m ({axis})", value, -1.0, 1.0, "m")
 
     def parameters(self) -> CapsuleParameters:
         return CapsuleParameters(self.mass_kg, self.center_of_mass_in_tip_m)
