@@ -241,6 +241,8 @@ def check_within(field_name: str, value: float, low: float, high: float, unit: s
     if not low <= value <= high:
         raise ValueError(f"{field_name} = {value:g} {unit} is outside the plausible range "
                          f"{low:g} .. {high:g} {unit} (a unit slip?)")
+
+
 DISTURBANCE_MOMENT_NAMES: tuple[str, ...] = ("wd_mx", "wd_my", "wd_mz")
 DISTURBANCE_NAMES: tuple[str, ...] = ("wd_fx", "wd_fy", "wd_fz") + DISTURBANCE_MOMENT_NAMES
 

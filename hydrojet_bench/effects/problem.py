@@ -110,7 +110,7 @@ class RodProblem:
 
     def actuation_matrix(self) -> np.ndarray:
         """Effective 3x3 map from commanded jet forces (N) to the tip-frame follower force."""
-        return actuation_matrix(self.jet_ring_angle_rad) * self.jet_gains[None, :]
+        return actuation_matrix(float(self.jet_ring_angle_rad)) * self.jet_gains[None, :]
 
     @property
     def depends_on_previous_state(self) -> bool:
