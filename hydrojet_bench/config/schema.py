@@ -118,6 +118,13 @@ def check_unit_quaternion(field: str, q: tuple[float, ...] | None) -> None:
 # --- the rig's physics ---------------------------------------------------------------
 
 
+def _check_vector_within(field_name: str, vector: tuple[float, float, float], limit_m: float) -> None:
+    """Each component of a position or offset (m) within +-``limit_m``: finite yet far
+    larger is a unit slip, and the frame arithmetic overflows on it."""
+    for axis, value in zip("xyz", vector):
+        check_within(f"{field_name} ({axis})", value, -limit_m, limit_m, "m")
+
+
 class GravityTable(Table, kw_only=True):
     in_tracker_m_s2: Vector3  # gravitational acceleration in the tracker frame, m/s^2
 
@@ -135,6 +142,7 @@ class BaseTable(Table, kw_only=True):
 
     def __post_init__(self) -> None:
         check_unit_quaternion("orientation_in_tracker", self.orientation_in_tracker)
+        _check_vector_within("position_in_tracker_m", self.position_in_tracker_m, 10.0)
 
 
 class BaseSensorTable(Table, kw_only=True):
@@ -143,6 +151,7 @@ class BaseSensorTable(Table, kw_only=True):
 
     def __post_init__(self) -> None:
         check_unit_quaternion("rotation_in_base", self.rotation_in_base)
+        _check_vector_within("offset_in_base_m", self.offset_in_base_m, 1.0)
 
 
 class TipSensorTable(Table, kw_only=True):
@@ -151,6 +160,7 @@ class TipSensorTable(Table, kw_only=True):
 
     def __post_init__(self) -> None:
         check_unit_quaternion("rotation_in_tip", self.rotation_in_tip)
+        _check_vector_within("offset_in_tip_m", self.offset_in_tip_m, 1.0)
 
 
 class RodTable(Table, kw_only=True):
@@ -182,8 +192,7 @@ class CapsuleTable(Table, kw_only=True):
 
     def __post_init__(self) -> None:
         check_within("mass_kg", self.mass_kg, 0.0, 1.0, "kg")
-        for axis, value in zip("xyz", self.center_of_mass_in_tip_m):
-            check_within(f"center_of_mass_in_tip_m ({axis})", value, -1.0, 1.0, "m")
+        _check_vector_within("center_of_mass_in_tip_m", self.center_of_mass_in_tip_m, 1.0)
 
     def parameters(self) -> CapsuleParameters:
         return CapsuleParameters(self.mass_kg, self.center_of_mass_in_tip_m)
