@@ -30,6 +30,7 @@ from numba import njit
 from ..config.schema import OnlineSettings
 from ..geometry import matrix_from_quat
 from ..models import kernels
+from ..models.shooting import seeds_kernel
 from ..params import DISTURBANCE_MOMENT_NAMES, PARAMETER_SCALES, ModelParameters, with_parameters
 from ..sensitivity import DEFAULT_RELATIVE_STEP, disturbance_columns
 
@@ -120,7 +121,7 @@ class OnlineDisturbanceEstimator:
         nothing to start from or a solve inside did not finish (`_update` then takes the
         model's whole solve path)."""
         previous = self._previous
-        if previous is None or previous.jacobian.shape != (kernels.UNKNOWNS, kernels.UNKNOWNS):
+        if not seeds_kernel(previous):
             return None
         model = self.model
         work = model.workspace(packed)

@@ -352,7 +352,7 @@ class ShootingModel:
         is expected to turn from ``warm_start``'s (a rotation vector in its tip frame, from
         a sensitivity): the solver then starts there, with ``warm_start``'s Jacobian."""
         work = self.workspace(prepared)
-        if _seeds_kernel(warm_start):
+        if seeds_kernel(warm_start):
             reference = (warm_start.tip_rotation_in_base.copy() if predicted_tip_turn_rad is None
                          else kernels.turned(warm_start.tip_rotation_in_base, predicted_tip_turn_rad))
             jacobian = warm_start.jacobian.copy()
@@ -438,14 +438,14 @@ class ShootingModel:
         while len(solutions) < len(jets):
             row = len(solutions)
             start = warm_starts[row] if warm_starts[row] is not None else previous
-            if not shared or not _seeds_kernel(start):
+            if not shared or not seeds_kernel(start):
                 previous = self.solve(jets[row], params, previous=previous if along_path else None,
                                       warm_start=start)
                 solutions.append(previous)
                 continue
             # Rows from here whose own warm start (if any) can seed the kernel.
             end = row + 1
-            while end < len(jets) and (warm_starts[end] is None or _seeds_kernel(warm_starts[end])):
+            while end < len(jets) and (warm_starts[end] is None or seeds_kernel(warm_starts[end])):
                 end += 1
             solved = self._solve_run(template, jets[row:end], [start, *warm_starts[row + 1:end]])
             solutions.extend(solved)
@@ -592,7 +592,7 @@ def _tips(template: PreparedProblem, jet_forces_n: np.ndarray) -> np.ndarray:
     return tips
 
 
-def _seeds_kernel(solution: Solution | None) -> bool:
+def seeds_kernel(solution: Solution | None) -> bool:
     """Whether a solution can start a warm solve: it carries the solver's matrix."""
     return solution is not None and solution.jacobian.shape == (kernels.UNKNOWNS, kernels.UNKNOWNS)
 
