@@ -126,12 +126,12 @@ class OnlineDisturbanceEstimator:
         model = self.model
         work = model.workspace(packed)
         moment = self._moment.copy()
-        jacobian = previous.jacobian.copy()
+        work.jacobian[:] = previous.jacobian
         errors_deg = np.empty(2)
         done = _update_kernel(model.kind, model.resolution, model.tolerance, model.max_iterations, packed.profile,
                               packed.tip, packed.base, packed.beta, packed.length_m, packed.wrench_scale,
                               packed.moment_scale_nm, np.array(self.params.disturbance.moment_nm), moment,
-                              previous.rotations_in_base[-1].copy(), jacobian,
+                              previous.rotations_in_base[-1].copy(), work.jacobian,
                               np.ascontiguousarray(measured), packed.problem.base_sensor_mounting,
                               packed.problem.tip_sensor_mounting, budget, self.settings.tolerance_deg,
                               self.settings.damping, self.settings.gain, work.nodes_p, work.nodes_r, work.base_wrench,
@@ -139,7 +139,7 @@ class OnlineDisturbanceEstimator:
         if done < 0:
             return None
         return EstimateStep(float(errors_deg[0]), float(errors_deg[1]), int(done), moment,
-                            model.solution_from(packed, jacobian, work))
+                            model.solution_from(packed, work))
 
     def _update(self, packed: PreparedProblem, measured: np.ndarray, budget: int) -> EstimateStep:
         """One update through the model's own solve path (cold start, ramping if need be)."""

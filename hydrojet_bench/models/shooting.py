@@ -272,17 +272,23 @@ class ShootingModel:
         parameters unless an effect reads the jet forces: rebuilding costs more than a
         warm solve. A clamp with path state then takes ``previous``'s rotation, which no
         effect reads (`RodProblem.previous_base_rotation_vector_rad`)."""
-        jets = np.asarray(jet_forces_n, dtype=float)
-        if jets.shape != (3,) or not all(map(math.isfinite, jets.tolist())):
-            raise ValueError(f"jet_forces_n must be 3 finite numbers, got {jet_forces_n!r}")
-        cached = self._cached
-        if cached is not None and cached.problem.params is params and not self._uses_actuation:
+        jets = _checked_jets(jet_forces_n)
+        cached = self._reusable_packing(params)
+        if cached is not None:
             if cached.problem.depends_on_previous_state:
                 return cached.with_path_state(jets, previous)
             return cached.with_jets(jets)
         prepared = self._pack(self.build_problem(jets, params, previous))
         self._cached = prepared
         return prepared
+
+    def _reusable_packing(self, params: ModelParameters) -> PreparedProblem | None:
+        """The last packing, if other jets under ``params`` pack to it with only the jets
+        (and a clamp's path state) changed: no effect reads the jets."""
+        cached = self._cached
+        if cached is not None and cached.problem.params is params and not self._uses_actuation:
+            return cached
+        return None
 
     def shares_packing(self, prepared: PreparedProblem) -> bool:
         """Whether other jet forces under the same parameters pack to this problem with
@@ -343,8 +349,17 @@ class ShootingModel:
         warm_start: a nearby solution used only to seed the solver; it never changes the
             answer, only how fast it is found.
         """
-        prepared = self.prepare(jet_forces_n, params, previous)
-        return self.solve_prepared(prepared, warm_start if warm_start is not None else previous)
+        seed = warm_start if warm_start is not None else previous
+        cached = self._reusable_packing(params)
+        if cached is not None and not cached.problem.depends_on_previous_state and seeds_kernel(seed):
+            # The usual warm solve, other jets under the same parameters: one kernel call
+            # on the last packing, which `prepare` would copy only to change the jets.
+            jets = _checked_jets(jet_forces_n)
+            work = self.workspace(cached)
+            if self._warm_run(cached, seed.tip_rotation_in_base, seed.jacobian, jets, work):
+                return self.solution_from(cached, work, jets)
+            return self._solve_unseeded(cached.with_jets(jets), seed, work)
+        return self.solve_prepared(self.prepare(jet_forces_n, params, previous), seed)
 
     def solve_prepared(self, prepared: PreparedProblem, warm_start: Solution | None = None,
                        predicted_tip_turn_rad: np.ndarray | None = None) -> Solution:
@@ -353,14 +368,17 @@ class ShootingModel:
         a sensitivity): the solver then starts there, with ``warm_start``'s Jacobian."""
         work = self.workspace(prepared)
         if seeds_kernel(warm_start):
-            reference = (warm_start.tip_rotation_in_base.copy() if predicted_tip_turn_rad is None
-                         else kernels.turned(warm_start.tip_rotation_in_base, predicted_tip_turn_rad))
-            jacobian = warm_start.jacobian.copy()
-            if self._run(prepared, reference, jacobian, True, 1.0, work):
-                return self.solution_from(prepared, jacobian, work)
-        jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
-        if self._run(prepared, np.eye(3), jacobian, False, 1.0, work):
-            solution = self.solution_from(prepared, jacobian, work)
+            rotation = (warm_start.tip_rotation_in_base if predicted_tip_turn_rad is None
+                        else kernels.turned(warm_start.tip_rotation_in_base, predicted_tip_turn_rad))
+            if self._warm_run(prepared, rotation, warm_start.jacobian, None, work):
+                return self.solution_from(prepared, work)
+        return self._solve_unseeded(prepared, warm_start, work)
+
+    def _solve_unseeded(self, prepared: PreparedProblem, warm_start: Solution | None, work: Workspace) -> Solution:
+        """`solve_prepared` once a warm start is missing or failed: a cold start, then load
+        ramping, then a search past a fold."""
+        if self._run(prepared, np.eye(3), False, 1.0, work):
+            solution = self.solution_from(prepared, work)
             if solution.bend_angle_deg <= RAMP_BEND_DEG:
                 return solution
         nearest = [] if warm_start is None else [warm_start.tip_rotation_in_base]
@@ -501,20 +519,18 @@ class ShootingModel:
         stage (None if none was)."""
         reference = np.eye(3)
         last_solved = None
-        jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
         have_jacobian = False
         for stage in range(1, stages + 1):
             # The kernel leaves ``reference`` at this stage's tip orientation.
-            if not self._run(prepared, reference, jacobian, have_jacobian, stage / stages, work):
+            if not self._run(prepared, reference, have_jacobian, stage / stages, work):
                 return None, last_solved
             last_solved = reference.copy()
             have_jacobian = True
-        return self.solution_from(prepared, jacobian, work), None
+        return self.solution_from(prepared, work), None
 
     def _snap(self, prepared: PreparedProblem, nearest: Sequence[np.ndarray], work: Workspace) -> Solution | None:
         """Full load, started from each of the ``nearest`` solved tip orientations turned
         further about its own bend axis (`SNAP_TURNS_DEG`): the branch past a fold."""
-        jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
         for rotation in nearest:
             bend = so3_log(rotation)
             angle = float(np.linalg.norm(bend))
@@ -523,16 +539,28 @@ class ShootingModel:
             for turn_deg in SNAP_TURNS_DEG:
                 # The bend's rotation vector is the same in the tip frame as in the base's.
                 reference = kernels.turned(rotation, bend * (math.radians(turn_deg) / angle))
-                if self._run(prepared, reference, jacobian, False, 1.0, work):
-                    return self.solution_from(prepared, jacobian, work)
+                if self._run(prepared, reference, False, 1.0, work):
+                    return self.solution_from(prepared, work)
         return None
 
-    def _run(self, prepared: PreparedProblem, reference: np.ndarray, jacobian: np.ndarray,
-             have_jacobian: bool, load_scale: float, work: Workspace) -> bool:
-        kernels.solve(self.kind, self.resolution, reference, jacobian, have_jacobian, prepared.profile,
+    def _run(self, prepared: PreparedProblem, reference: np.ndarray, have_jacobian: bool, load_scale: float,
+             work: Workspace) -> bool:
+        """`kernels.solve` from ``reference`` (turned in place), starting from
+        ``work.jacobian`` when ``have_jacobian``; whether it converged."""
+        kernels.solve(self.kind, self.resolution, reference, work.jacobian, have_jacobian, prepared.profile,
                       prepared.tip, prepared.base, prepared.beta, load_scale, self.tolerance,
                       self.max_iterations, prepared.length_m, prepared.wrench_scale, work.nodes_p, work.nodes_r,
                       work.base_wrench, work.clamp_rotation, work.info)
+        return work.info[0] == kernels.CONVERGED
+
+    def _warm_run(self, prepared: PreparedProblem, seed_rotation: np.ndarray, seed_jacobian: np.ndarray,
+                  jet_forces_n: np.ndarray | None, work: Workspace) -> bool:
+        """`kernels.warm_solve`: full load from a seed's tip rotation and matrix (neither
+        changed), under other jets (N) if given; whether it converged."""
+        kernels.warm_solve(self.kind, self.resolution, seed_rotation, seed_jacobian, jet_forces_n, prepared.profile,
+                           prepared.tip, prepared.base, prepared.beta, self.tolerance, self.max_iterations,
+                           prepared.length_m, prepared.wrench_scale, work.nodes_p, work.nodes_r, work.base_wrench,
+                           work.clamp_rotation, work.jacobian, work.info)
         return work.info[0] == kernels.CONVERGED
 
     @staticmethod
@@ -540,15 +568,17 @@ class ShootingModel:
         """Fresh output buffers for one solve of ``prepared``."""
         return Workspace(len(prepared.node_arc_length_m))
 
-    def solution_from(self, prepared: PreparedProblem, jacobian: np.ndarray, work: Workspace) -> Solution:
-        """The `Solution` a converged kernel solve of ``prepared`` left in ``work``, with
-        its solver matrix ``jacobian`` (both kept, not copied)."""
+    def solution_from(self, prepared: PreparedProblem, work: Workspace,
+                      jet_forces_n: np.ndarray | None = None) -> Solution:
+        """The `Solution` a converged kernel solve of ``prepared`` left in ``work`` (kept,
+        not copied), under ``prepared``'s jets or the given ones (N, kept too)."""
         problem = prepared.problem
+        if jet_forces_n is None:
+            jet_forces_n = prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].copy()
         return Solution(
-            self.name, prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].copy(), prepared.node_arc_length_m,
-            work.nodes_p, work.nodes_r, work.base_wrench,
+            self.name, jet_forces_n, prepared.node_arc_length_m, work.nodes_p, work.nodes_r, work.base_wrench,
             work.clamp_rotation if prepared.compliant_clamp else _NO_ROTATION, problem.base_sensor_mounting,
-            problem.tip_sensor_mounting, int(work.info[1]), float(work.info[2]), jacobian,
+            problem.tip_sensor_mounting, int(work.info[1]), float(work.info[2]), work.jacobian,
             problem.base_sensor_offset_m,
         )
 
@@ -592,6 +622,14 @@ def _tips(template: PreparedProblem, jet_forces_n: np.ndarray) -> np.ndarray:
     return tips
 
 
+def _checked_jets(jet_forces_n: Sequence[float]) -> np.ndarray:
+    """The jet forces (N) as a new array of 3 floats, or ValueError."""
+    jets = np.array(jet_forces_n, dtype=float)
+    if jets.shape != (3,) or not all(map(math.isfinite, jets.tolist())):
+        raise ValueError(f"jet_forces_n must be 3 finite numbers, got {jet_forces_n!r}")
+    return jets
+
+
 def seeds_kernel(solution: Solution | None) -> bool:
     """Whether a solution can start a warm solve: it carries the solver's matrix."""
     return solution is not None and solution.jacobian.shape == (kernels.UNKNOWNS, kernels.UNKNOWNS)
@@ -602,16 +640,17 @@ _NO_ROTATION.flags.writeable = False
 
 
 class Workspace:
-    """Output buffers of one solve (the kernel writes the shape and the clamp's wrench and
-    rotation; the `Solution` keeps them)."""
+    """Output buffers of one solve (the kernel writes the shape, the clamp's wrench and
+    rotation and its own matrix; the `Solution` keeps them)."""
 
-    __slots__ = ("nodes_p", "nodes_r", "base_wrench", "clamp_rotation", "info")
+    __slots__ = ("nodes_p", "nodes_r", "base_wrench", "clamp_rotation", "jacobian", "info")
 
     def __init__(self, nodes: int) -> None:
         self.nodes_p = np.empty((nodes, 3))
         self.nodes_r = np.empty((nodes, 3, 3))
         self.base_wrench = np.empty(6)
         self.clamp_rotation = np.empty(3)
+        self.jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
         self.info = np.empty(4)
 
 

@@ -199,6 +199,32 @@ def _same_solutions(batch, loop):
 
 
 @pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=IDS)
+def test_a_warm_solve_on_the_last_packing_is_the_packed_problems_solve_bit_for_bit(model_type):
+    # `solve` under the parameters of the last packing goes straight to the kernel; it
+    # must be `solve_prepared` on the problem `prepare` packs, and touch neither the
+    # seed nor the caller's jets.
+    model = model_type()
+    seed = model.solve([0.05, 0.0, 0.0], ACROSS)
+    seed_rotations, seed_jacobian = seed.rotations_in_base.copy(), seed.jacobian.copy()
+    jets = np.array([0.052, 0.004, 0.0])
+    direct = model.solve(jets, ACROSS, warm_start=seed)
+    packed = model.solve_prepared(model.prepare(jets, ACROSS), seed)
+    _same_solutions([direct], [packed])
+    np.testing.assert_array_equal(seed.rotations_in_base, seed_rotations)
+    np.testing.assert_array_equal(seed.jacobian, seed_jacobian)
+    jets[0] = 1.0
+    assert direct.jet_forces_n.tolist() == [0.052, 0.004, 0.0]
+    # A seed too far for the warm solve's iterations: the full path (cold start,
+    # ramping) from the same direct call, as from the packed problem.
+    short = model_type(max_iterations=8)
+    near = short.solve([0.05, 0.0, 0.0], ACROSS)
+    _same_solutions([short.solve([0.0, 0.2, 0.05], ACROSS, warm_start=near)],
+                    [short.solve_prepared(short.prepare([0.0, 0.2, 0.05], ACROSS), near)])
+    with pytest.raises(ValueError, match="jet_forces_n"):
+        model.solve([0.05, float("nan"), 0.0], ACROSS, warm_start=seed)
+
+
+@pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=IDS)
 def test_a_batch_of_solves_is_the_loop_of_single_solves_bit_for_bit(model_type):
     model = model_type()
     rng = np.random.default_rng(7)
