@@ -1016,25 +1016,25 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
 
 
 @njit(cache=True, nogil=True)
-def warm_solve(kind, resolution, seed_rotation, seed_jacobian, jet_forces, profile, tip, base, beta, tolerance,
-               max_iterations, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation, jacobian, info):
-    """`solve` at full load from a seed: its tip rotation ``seed_rotation`` and its matrix
-    ``seed_jacobian``, both only read; the updated matrix goes to ``jacobian``. When
-    ``jet_forces`` is not None, the problem is ``tip`` with those jets (N). The copies are
-    made here because in Python each costs a few tenths of a microsecond, and a warm
-    solve costs about fifteen."""
-    reference = np.empty((3, 3))
+def solve_from(kind, resolution, seed_rotation, seed_jacobian, have_jacobian, jet_forces, profile, tip, base, beta,
+               load_scale, tolerance, max_iterations, length, wrench_scale, nodes_p, nodes_r, base_wrench,
+               clamp_rotation, reference, jacobian, info):
+    """`solve` of ``tip`` under the jets ``jet_forces`` (N), started at the tip rotation
+    ``seed_rotation`` and, when ``have_jacobian``, from the matrix ``seed_jacobian``. The
+    seeds are only read (a continuation passes ``reference`` and ``jacobian`` themselves);
+    the solve turns ``reference`` and updates ``jacobian`` as `solve` does. The one entry
+    for single solves: the copies cost a few tenths of a microsecond each in Python, a
+    warm solve about fifteen, and a second compiled entry about 3 MB when loaded."""
     for i in range(3):
         for j in range(3):
             reference[i, j] = seed_rotation[i, j]
-            jacobian[i, j] = seed_jacobian[i, j]
-    loads = tip
-    if jet_forces is not None:
-        loads = tip.copy()
-        for k in range(3):
-            loads[TIP_JETS + k] = jet_forces[k]
-    solve(kind, resolution, reference, jacobian, True, profile, loads, base, beta, 1.0, tolerance, max_iterations,
-          length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation, info)
+            if have_jacobian:
+                jacobian[i, j] = seed_jacobian[i, j]
+    loads = tip.copy()
+    for k in range(3):
+        loads[TIP_JETS + k] = jet_forces[k]
+    solve(kind, resolution, reference, jacobian, have_jacobian, profile, loads, base, beta, load_scale, tolerance,
+          max_iterations, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation, info)
 
 
 @njit(cache=True, nogil=True)

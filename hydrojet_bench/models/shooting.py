@@ -185,6 +185,11 @@ class PreparedProblem:
                                self.length_m, self.force_scale_n, self.moment_scale_nm, self.node_arc_length_m,
                                self.wrench_scale, self.compliant_clamp)
 
+    @property
+    def jet_forces_n(self) -> np.ndarray:
+        """The commanded jet forces (N) packed in ``tip`` (a view)."""
+        return self.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3]
+
     def with_jets(self, jet_forces_n: np.ndarray) -> "PreparedProblem":
         tip = self.tip.copy()
         tip[kernels.TIP_JETS:kernels.TIP_JETS + 3] = jet_forces_n
@@ -356,7 +361,7 @@ class ShootingModel:
             # on the last packing, which `prepare` would copy only to change the jets.
             jets = _checked_jets(jet_forces_n)
             work = self.workspace(cached)
-            if self._warm_run(cached, seed.tip_rotation_in_base, seed.jacobian, jets, work):
+            if self._run(cached, jets, seed.tip_rotation_in_base, 1.0, work, seed.jacobian):
                 return self.solution_from(cached, work, jets)
             return self._solve_unseeded(cached.with_jets(jets), seed, work)
         return self.solve_prepared(self.prepare(jet_forces_n, params, previous), seed)
@@ -370,14 +375,14 @@ class ShootingModel:
         if seeds_kernel(warm_start):
             rotation = (warm_start.tip_rotation_in_base if predicted_tip_turn_rad is None
                         else kernels.turned(warm_start.tip_rotation_in_base, predicted_tip_turn_rad))
-            if self._warm_run(prepared, rotation, warm_start.jacobian, None, work):
+            if self._run(prepared, prepared.jet_forces_n, rotation, 1.0, work, warm_start.jacobian):
                 return self.solution_from(prepared, work)
         return self._solve_unseeded(prepared, warm_start, work)
 
     def _solve_unseeded(self, prepared: PreparedProblem, warm_start: Solution | None, work: Workspace) -> Solution:
         """`solve_prepared` once a warm start is missing or failed: a cold start, then load
         ramping, then a search past a fold."""
-        if self._run(prepared, np.eye(3), False, 1.0, work):
+        if self._run(prepared, prepared.jet_forces_n, np.eye(3), 1.0, work):
             solution = self.solution_from(prepared, work)
             if solution.bend_angle_deg <= RAMP_BEND_DEG:
                 return solution
@@ -393,7 +398,7 @@ class ShootingModel:
             return snapped
         raise ConvergenceError(
             f"{self.name} model did not converge for jet forces "
-            f"{prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].tolist()} N (residual {work.info[2]:.3g} "
+            f"{prepared.jet_forces_n.tolist()} N (residual {work.info[2]:.3g} "
             f"after a direct solve, load ramping in up to {RAMP_SCHEDULES[-1]} stages and a search past a fold)")
 
     def tip_wrench_columns(self, prepared: PreparedProblem, nominal: Solution, components: np.ndarray,
@@ -517,15 +522,16 @@ class ShootingModel:
         """Continuation: scale every load from 1/stages up to 1, each stage seeded by the
         last. Returns the solution, or None and the tip orientation of the last solved
         stage (None if none was)."""
-        reference = np.eye(3)
+        jets = prepared.jet_forces_n
+        rotation, jacobian = np.eye(3), None
         last_solved = None
-        have_jacobian = False
         for stage in range(1, stages + 1):
-            # The kernel leaves ``reference`` at this stage's tip orientation.
-            if not self._run(prepared, reference, have_jacobian, stage / stages, work):
+            if not self._run(prepared, jets, rotation, stage / stages, work, jacobian):
                 return None, last_solved
-            last_solved = reference.copy()
-            have_jacobian = True
+            # The kernel left the reference at this stage's tip orientation: the next
+            # stage starts there, from this stage's matrix.
+            last_solved = work.reference.copy()
+            rotation, jacobian = work.reference, work.jacobian
         return self.solution_from(prepared, work), None
 
     def _snap(self, prepared: PreparedProblem, nearest: Sequence[np.ndarray], work: Workspace) -> Solution | None:
@@ -539,28 +545,22 @@ class ShootingModel:
             for turn_deg in SNAP_TURNS_DEG:
                 # The bend's rotation vector is the same in the tip frame as in the base's.
                 reference = kernels.turned(rotation, bend * (math.radians(turn_deg) / angle))
-                if self._run(prepared, reference, False, 1.0, work):
+                if self._run(prepared, prepared.jet_forces_n, reference, 1.0, work):
                     return self.solution_from(prepared, work)
         return None
 
-    def _run(self, prepared: PreparedProblem, reference: np.ndarray, have_jacobian: bool, load_scale: float,
-             work: Workspace) -> bool:
-        """`kernels.solve` from ``reference`` (turned in place), starting from
-        ``work.jacobian`` when ``have_jacobian``; whether it converged."""
-        kernels.solve(self.kind, self.resolution, reference, work.jacobian, have_jacobian, prepared.profile,
-                      prepared.tip, prepared.base, prepared.beta, load_scale, self.tolerance,
-                      self.max_iterations, prepared.length_m, prepared.wrench_scale, work.nodes_p, work.nodes_r,
-                      work.base_wrench, work.clamp_rotation, work.info)
-        return work.info[0] == kernels.CONVERGED
-
-    def _warm_run(self, prepared: PreparedProblem, seed_rotation: np.ndarray, seed_jacobian: np.ndarray,
-                  jet_forces_n: np.ndarray | None, work: Workspace) -> bool:
-        """`kernels.warm_solve`: full load from a seed's tip rotation and matrix (neither
-        changed), under other jets (N) if given; whether it converged."""
-        kernels.warm_solve(self.kind, self.resolution, seed_rotation, seed_jacobian, jet_forces_n, prepared.profile,
-                           prepared.tip, prepared.base, prepared.beta, self.tolerance, self.max_iterations,
-                           prepared.length_m, prepared.wrench_scale, work.nodes_p, work.nodes_r, work.base_wrench,
-                           work.clamp_rotation, work.jacobian, work.info)
+    def _run(self, prepared: PreparedProblem, jet_forces_n: np.ndarray, seed_rotation: np.ndarray,
+             load_scale: float, work: Workspace, seed_jacobian: np.ndarray | None = None) -> bool:
+        """`kernels.solve_from`: ``prepared`` under the jets ``jet_forces_n`` (N) and
+        ``load_scale`` of every load, from the tip rotation ``seed_rotation`` and the
+        matrix ``seed_jacobian`` if given (else built); the seeds are not changed unless
+        they are ``work``'s own. Whether it converged."""
+        have_jacobian = seed_jacobian is not None
+        kernels.solve_from(self.kind, self.resolution, seed_rotation, seed_jacobian if have_jacobian else work.jacobian,
+                           have_jacobian, jet_forces_n, prepared.profile, prepared.tip, prepared.base, prepared.beta,
+                           load_scale, self.tolerance, self.max_iterations, prepared.length_m, prepared.wrench_scale,
+                           work.nodes_p, work.nodes_r, work.base_wrench, work.clamp_rotation, work.reference,
+                           work.jacobian, work.info)
         return work.info[0] == kernels.CONVERGED
 
     @staticmethod
@@ -574,7 +574,7 @@ class ShootingModel:
         not copied), under ``prepared``'s jets or the given ones (N, kept too)."""
         problem = prepared.problem
         if jet_forces_n is None:
-            jet_forces_n = prepared.tip[kernels.TIP_JETS:kernels.TIP_JETS + 3].copy()
+            jet_forces_n = prepared.jet_forces_n.copy()
         return Solution(
             self.name, jet_forces_n, prepared.node_arc_length_m, work.nodes_p, work.nodes_r, work.base_wrench,
             work.clamp_rotation if prepared.compliant_clamp else _NO_ROTATION, problem.base_sensor_mounting,
@@ -641,15 +641,16 @@ _NO_ROTATION.flags.writeable = False
 
 class Workspace:
     """Output buffers of one solve (the kernel writes the shape, the clamp's wrench and
-    rotation and its own matrix; the `Solution` keeps them)."""
+    rotation, its tip frame and its matrix; the `Solution` keeps them)."""
 
-    __slots__ = ("nodes_p", "nodes_r", "base_wrench", "clamp_rotation", "jacobian", "info")
+    __slots__ = ("nodes_p", "nodes_r", "base_wrench", "clamp_rotation", "reference", "jacobian", "info")
 
     def __init__(self, nodes: int) -> None:
         self.nodes_p = np.empty((nodes, 3))
         self.nodes_r = np.empty((nodes, 3, 3))
         self.base_wrench = np.empty(6)
         self.clamp_rotation = np.empty(3)
+        self.reference = np.empty((3, 3))
         self.jacobian = np.empty((kernels.UNKNOWNS, kernels.UNKNOWNS))
         self.info = np.empty(4)
 
