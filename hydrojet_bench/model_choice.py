@@ -19,7 +19,7 @@ from .estimation.calibration import DEFAULT_NAMES
 from .models import make_model
 from .models.shooting import ShootingModel
 from .params import ModelParameters
-from .params_io import ParameterFile, read_parameter_file, resolve_effect_spec
+from .params_io import ParameterFile, check_values_for, read_parameter_file, resolve_effect_spec
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,7 @@ class ModelChoice:
         """``nominal`` (a profile's parameters) with the parameter file's values applied."""
         if self.parameter_file is None:
             return nominal
+        check_values_for(self.model.effects, self.parameter_file.parameters, f"{self.parameter_path}: parameters.")
         return self.parameter_file.apply(nominal, self.parameter_path)
 
 

@@ -52,6 +52,9 @@ class ParameterFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_
         for name, value in self.parameters.items():
             if name in PLAUSIBLE_RANGES:
                 check_plausible(name, value, f"parameters.{name}")
+        for name, value in self.standard_errors.items():
+            if value < 0.0:
+                raise ValueError(f"standard_errors.{name} = {value:g} is negative")
 
     def apply(self, params: ModelParameters, source: Path | str = "parameters") -> ModelParameters:
         """``params`` with these values; an invalid value is a UserError naming the key."""
@@ -59,6 +62,32 @@ class ParameterFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_
             return with_parameters(params, self.parameters)
         except (KeyError, ValueError) as error:
             raise UserError(f"{source}: [parameters] {error.args[0]}") from None
+
+
+def check_values_for(effects: Sequence[Effect], values: Mapping[str, float], where: str, *,
+                     unknown_effects: bool = False) -> None:
+    """UserError ``{where}{name} ...`` for a value of ``values`` past its plausible range (the
+    flat names) or an effect parameter outside its physical limits, past which the effect
+    means nothing and the model may not solve (or overflow). An effect parameter of no
+    effect in ``effects`` is refused too, unless ``unknown_effects``."""
+    parameters = {f"{effect.name}.{parameter.name}": parameter for effect in effects for parameter in effect.parameters}
+    for name, value in values.items():
+        if name in PLAUSIBLE_RANGES:
+            try:
+                check_plausible(name, value, f"{where}{name}")
+            except ValueError as error:
+                raise UserError(str(error)) from None
+        elif name in parameters:
+            parameter = parameters[name]
+            low, high = parameter.limits
+            if not low <= value <= high:
+                unit = "" if parameter.unit in ("", "1") else f" {parameter.unit}"
+                reason = f" ({parameter.limit_reason})" if parameter.limit_reason else ""
+                raise UserError(f"{where}{name} = {value:g}{unit} is outside its physical limits "
+                                f"{low:g} .. {high:g}{unit}{reason}")
+        elif "." in name and not unknown_effects:
+            raise UserError(f"{where}{name}: the model has no such effect parameter (its effects: "
+                            f"{', '.join(effect.name for effect in effects)})")
 
 
 def effect_specs(effects: Sequence[Effect], folder: Path) -> tuple[str, ...]:

@@ -72,3 +72,35 @@ def test_a_missing_fitted_parameter_is_named_not_taken_from_the_profile(tmp_path
 def test_a_missing_file_is_named(tmp_path: Path) -> None:
     with pytest.raises(UserError, match="no such parameter file"):
         read_parameter_file(tmp_path / "absent.toml")
+
+
+@pytest.mark.parametrize(("effects", "key", "value", "message"), [
+    (["gravity", "jet_gain"], "jet_gain.gain_1", -5.0,
+     "parameters.jet_gain.gain_1 = -5 is outside its physical limits 0 .. 3 (0: a blocked nozzle"),
+    (["gravity"], "gravity.weight_scale", 1e308, "parameters.gravity.weight_scale = 1e+308 is outside its physical"),
+    (["gravity", "sensor_mounting"], "sensor_mounting.rx_rad", 1e308,
+     "parameters.sensor_mounting.rx_rad = 1e+308 rad is outside its physical limits -0.8 .. 0.8 rad"),
+    (["gravity", "anisotropic_stiffness"], "anisotropic_stiffness.stiffness_ratio", 0.0,
+     "parameters.anisotropic_stiffness.stiffness_ratio = 0 is outside"),
+    (["gravity"], "foo.bar", 1.0, "parameters.foo.bar: the model has no such effect parameter (its effects: gravity)"),
+])
+def test_effect_parameters_past_their_physical_limits_name_the_key(tmp_path: Path, effects: list[str], key: str,
+                                                                   value: float, message: str) -> None:
+    # Such values reached the solver: an overflow, a division by zero or a singular
+    # matrix came back as a traceback, or NaN errors with exit 0.
+    from hydrojet_bench.model_choice import choose_model
+
+    path = tmp_path / "p.toml"
+    path.write_text(f'model = "cosserat"\neffects = {effects!r}\n[parameters]\n'.replace("'", '"')
+                    + NOMINAL_TEXT + f'"{key}" = {value!r}\n')
+    choice = choose_model(None, [], path)
+    with pytest.raises(UserError) as info:
+        choice.parameters(ModelParameters())
+    assert str(info.value).startswith(f"{path}: {message}"), str(info.value)
+
+
+def test_a_negative_standard_error_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "p.toml"
+    path.write_text('model = "cosserat"\n[parameters]\n' + NOMINAL_TEXT + "[standard_errors]\nE0 = -1e308\n")
+    with pytest.raises(UserError, match="standard_errors.E0 = -1e[+]308 is negative"):
+        read_parameter_file(path)

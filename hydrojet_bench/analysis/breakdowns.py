@@ -53,6 +53,9 @@ LOADING, UNLOADING, HOLD = "loading", "unloading", "hold"
 # forces repeat exactly, measured ones within a fraction of a percent.
 FORCE_MATCH_FRACTION = 1e-3
 DEFAULT_TIME_BLOCKS = 6
+# Steps spanning less time than this have no trend to report; a span near zero also made
+# the fit fail to converge (steps 1e-300 s apart).
+MIN_TREND_SPAN_S = 1.0
 DEFAULT_WORST_COUNT = 10
 MISSING_LABEL = "what the model is missing"
 # The mean norm of the difference of two independent isotropic 3-D noise vectors, each
@@ -109,7 +112,7 @@ class TimeBlock:
 class Drift:
     """Errors over time: RMS per block of consecutive steps, and the least-squares
     slope of the per-step errors against time (deg/min, mm/min); None when the steps
-    span no time."""
+    span less than `MIN_TREND_SPAN_S`."""
 
     blocks: tuple[TimeBlock, ...]
     trend_deg_per_min: float | None
@@ -382,12 +385,13 @@ def drift(orientation_deg: np.ndarray, position_mm: np.ndarray | None, time_s: n
     table = tuple(TimeBlock(float(time_s[rows[0]]), float(time_s[rows[-1]]),
                             summarise(orientation_deg[rows], None if position_mm is None else position_mm[rows]))
                   for rows in parts)
-    minutes = (time_s - time_s[0]) / 60.0
+    span_s = float(np.ptp(time_s)) if len(time_s) else 0.0
 
     def slope(errors: np.ndarray | None) -> float | None:
-        if errors is None or np.ptp(minutes) == 0.0:
+        if errors is None or not span_s >= MIN_TREND_SPAN_S:
             return None
-        return float(np.polyfit(minutes, errors, 1)[0])
+        # Against time centred and scaled to [-0.5, 0.5]: well conditioned at any clock.
+        return float(np.polyfit((time_s - time_s.mean()) / span_s, errors, 1)[0]) / (span_s / 60.0)
 
     return Drift(table, slope(orientation_deg), slope(position_mm))
 

@@ -26,6 +26,7 @@ from ..logs.dataset import rig_profile_of_log
 from ..logs.topics import ModelPrediction, Parameters, Step
 from ..models.shooting import ShootingModel
 from ..params import ModelParameters, with_parameters
+from ..params_io import check_values_for
 from ..profile import RigProfile
 
 STEP_TOPIC = Step.topic
@@ -120,6 +121,10 @@ def replay(session: LoggedSession, model: ShootingModel, online: OnlineSettings 
             if record is not current:
                 current, predictor = record, None
         if predictor is None:
+            if params is None:
+                # Effects the log names but this model leaves out are not the log's error.
+                check_values_for(model.effects, current.values, f"{session.path}: {PARAMETERS_TOPIC} at "
+                                 f"{current.t_s:.3f} s: ", unknown_effects=True)
             row_params = params if params is not None else with_parameters(base, current.values)
             predictor = PathPredictor(model, row_params, online)
         try:

@@ -58,7 +58,8 @@ import numpy as np
 
 from ..errors import UserError
 from ..profile import RigProfile
-from .dataset import QUATERNION_NORM_TOLERANCE, Dataset, SampleFlag, saturation_flags, steps_from_runs
+from .dataset import (MAX_ABS_POSITION_M, MAX_ABS_TIME_S, MAX_JET_FORCE_N, QUATERNION_NORM_TOLERANCE, Dataset,
+                      SampleFlag, saturation_flags, steps_from_runs)
 
 REQUIRED_COLUMNS: tuple[str, ...] = (
     "t", "q1", "q2", "q3",
@@ -390,6 +391,12 @@ def _first_undecodable_byte(path: Path) -> int:
     raise AssertionError("a decoding error that decoding the whole file does not repeat")  # pragma: no cover
 
 
+# Magnitude and unit of each measured column (`Dataset`'s limits, checked here to name
+# the line).
+_PLAUSIBLE = {"t": (MAX_ABS_TIME_S, "s"), **{q: (MAX_JET_FORCE_N, "N") for q in ("q1", "q2", "q3")},
+              **{column: (MAX_ABS_POSITION_M, "m") for triplet in POSITION_COLUMNS.values() for column in triplet}}
+
+
 def _parse_numbers(strings: tuple[str, ...], column: str, problem: _Problem, column_order: int,
                    where: Callable[[int, str], str], first_row: int, *, integer: bool) -> np.ndarray | None:
     """One block of a column's cells as numbers (``strings[0]`` is row ``first_row``);
@@ -422,6 +429,14 @@ def _parse_numbers(strings: tuple[str, ...], column: str, problem: _Problem, col
         i = int(bad[0])
         problem.offer(first_row + i, column_order, f"{where(first_row + i, column)}: must be a finite number, got {strings[i].strip()}")
         return None
+    limit = _PLAUSIBLE.get(column)
+    if limit is not None:
+        beyond = np.flatnonzero(np.abs(array) > limit[0])
+        if len(beyond):
+            i = int(beyond[0])
+            problem.offer(first_row + i, column_order, f"{where(first_row + i, column)}: {strings[i].strip()} is past "
+                                                       f"the plausible {limit[0]:g} {limit[1]} in magnitude")
+            return None
     if integer:
         # Labels, not measurements: beyond 2**53 a float no longer holds every integer.
         fractional = np.flatnonzero((array != np.round(array)) | (np.abs(array) > 2.0**53))

@@ -33,6 +33,12 @@ from ..profile import RigProfile
 # perhaps printed with 6 digits); they are renormalised on construction.
 QUATERNION_NORM_TOLERANCE = 1e-3
 
+# Plausible magnitudes. A finite value past them is an input error (a unit slip, a
+# corrupt cell), and the largest overflow the step averages and frame arithmetic to inf.
+MAX_ABS_TIME_S = 1e10  # a Unix time up to the year 2286; session times are far smaller
+MAX_JET_FORCE_N = 100.0  # the bench's water jets deliver well under 1 N
+MAX_ABS_POSITION_M = 10.0  # a tracker's field is a metre across; profiles bound the base at 10 m
+
 
 class SampleFlag(enum.IntFlag):
     """What is wrong with one sample; ``SampleFlag(0)`` (``NONE``) is a good sample.
@@ -106,7 +112,10 @@ def _average_groups(q: np.ndarray, group: np.ndarray, groups: int, weights: np.n
     return mean * sign[:, None]
 
 
-def _float_array(name: str, value: ArrayLike, shape_tail: tuple[int, ...], rows: int | None) -> np.ndarray:
+def _float_array(name: str, value: ArrayLike, shape_tail: tuple[int, ...], rows: int | None,
+                 limit: float = np.inf, unit: str = "") -> np.ndarray:
+    """``value`` as floats of shape (rows,) + ``shape_tail``, finite and within ``limit``
+    (in ``unit``) in magnitude, or ValueError naming the field and the first bad row."""
     try:
         array = np.array(value, dtype=float)
     except (TypeError, ValueError):
@@ -120,6 +129,11 @@ def _float_array(name: str, value: ArrayLike, shape_tail: tuple[int, ...], rows:
     bad = ~np.isfinite(array).all(axis=tuple(range(1, array.ndim)))
     if np.any(bad):
         raise ValueError(f"Dataset.{name} row {int(np.argmax(bad))} is not finite")
+    beyond = ~(np.abs(array) <= limit).all(axis=tuple(range(1, array.ndim)))
+    if np.any(beyond):
+        i = int(np.argmax(beyond))
+        raise ValueError(f"Dataset.{name} row {i} holds {np.abs(array[i]).max():g} {unit}, past the plausible "
+                         f"{limit:g} {unit} in magnitude")
     return array
 
 
@@ -177,14 +191,14 @@ class Dataset:
     def __post_init__(self) -> None:
         if not isinstance(self.profile, RigProfile):
             raise ValueError(f"Dataset.profile must be a RigProfile, got {type(self.profile).__name__}")
-        time = _float_array("time_s", self.time_s, (), None)
+        time = _float_array("time_s", self.time_s, (), None, MAX_ABS_TIME_S, "s")
         rows = len(time)
         backwards = np.diff(time) < 0.0
         if np.any(backwards):
             i = int(np.argmax(backwards)) + 1
             raise ValueError(f"Dataset.time_s row {i}: time goes backwards ({time[i]!r} s after {time[i - 1]!r} s)")
         arrays: dict[str, np.ndarray | None] = {"time_s": time}
-        arrays["jet_forces_n"] = _float_array("jet_forces_n", self.jet_forces_n, (3,), rows)
+        arrays["jet_forces_n"] = _float_array("jet_forces_n", self.jet_forces_n, (3,), rows, MAX_JET_FORCE_N, "N")
         for name in ("base_orientation", "tip_orientation"):
             q = _float_array(name, getattr(self, name), (4,), rows)
             norm = np.linalg.norm(q, axis=1)
@@ -196,7 +210,7 @@ class Dataset:
             arrays[name] = q / np.where(np.abs(norm - 1.0) > 1e-12, norm, 1.0)[:, None]
         for name in ("base_position_m", "tip_position_m"):
             value = getattr(self, name)
-            arrays[name] = None if value is None else _float_array(name, value, (3,), rows)
+            arrays[name] = None if value is None else _float_array(name, value, (3,), rows, MAX_ABS_POSITION_M, "m")
         sweep = np.full(rows, -1, dtype=np.int64) if self.sweep is None else _int_array("sweep", self.sweep, rows)
         if np.any(sweep < -1):
             i = int(np.argmax(sweep < -1))

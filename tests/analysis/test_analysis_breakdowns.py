@@ -166,6 +166,16 @@ def test_linear_drift_is_recovered_as_the_trend():
     assert drift(errors[:1], None, time_s[:1]).trend_deg_per_min is None
 
 
+@pytest.mark.parametrize("clock_s", [0.0, 1.7e9, -3.0e9])
+def test_the_trend_is_the_same_on_any_clock_and_absent_under_a_second(clock_s):
+    # A Unix clock shifts the times by 1e9 s; steps 1e-300 s apart made the fit fail.
+    time_s = clock_s + np.arange(40) * 30.0
+    errors = 1.0 + 0.5 * np.arange(40) * 30.0 / 60.0
+    assert drift(errors, None, time_s).trend_deg_per_min == pytest.approx(0.5, rel=1e-6)
+    assert drift(errors, errors, np.arange(40) * 1e-300).trend_deg_per_min is None
+    assert drift(errors, errors, np.arange(40) * (0.99 / 39)).trend_mm_per_min is None
+
+
 def test_worst_poses_are_ordered_worst_first_with_ties_in_time_order():
     errors = np.array([1.0, 5.0, 3.0, 5.0, 0.5, 2.0, 4.0, 0.1, 0.2, 0.3, 0.4, 6.0])
     steps = make_steps(np.full(12, 20.0), np.zeros(12), forces=np.tile([0.01, 0.0, 0.0], (12, 1)))

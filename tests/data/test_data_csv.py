@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 from hydrojet_bench.data import (REQUIRED_COLUMNS, Dataset, SampleFlag, csv_io, read_csv, read_csv_steps,
                                  saturation_flags, write_csv)
+from hydrojet_bench.data.dataset import MAX_ABS_POSITION_M
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.inputs import load_dataset
 from hydrojet_bench.profile import load_profile, profile_from_mapping
@@ -105,11 +106,15 @@ def test_forces_above_the_profile_limit_are_flagged_not_dropped(tmp_path: Path) 
         (set_cell(3, "q1", "-0.01"), 7, "q1", "a jet cannot pull"),
         (table(ROWS[:2] + ["# a late comment"] + ROWS[2:]), 6, None, "only allowed before the header"),
         (set_cell(1, "t", "1_000"), 5, "t", "'1_000' is not a number (no '_' separators)"),
+        (set_cell(2, "q3", "1e308"), 6, "q3", "1e308 is past the plausible 100 N in magnitude"),
+        (set_cell(1, "base_y", "-1e200"), 5, "base_y", "-1e200 is past the plausible 10 m in magnitude"),
+        (set_cell(3, "t", "1.7e12"), 7, "t", "1.7e12 is past the plausible 1e+10 s in magnitude"),
     ],
     ids=["missing-required", "unknown", "duplicate", "partial-triplet-header", "empty-cell",
          "partial-triplet-row", "short-row", "long-row", "non-numeric", "nan-quaternion", "inf-time",
          "non-unit-tip", "non-unit-base", "time-backwards", "fractional-sweep", "sweep-below-minus-one",
-         "negative-force", "late-comment", "digit-separator"],
+         "negative-force", "late-comment", "digit-separator", "absurd-force", "absurd-position",
+         "time-in-milliseconds"],
 )
 @pytest.mark.parametrize("block_rows", [1, 3, 8192], ids=lambda rows: f"blocks-of-{rows}")
 @pytest.mark.parametrize("reader", [read_csv, read_csv_steps], ids=lambda reader: reader.__name__)
@@ -190,6 +195,7 @@ def test_write_refuses_flags_the_contract_cannot_hold(tmp_path: Path) -> None:
 # --- round trip ------------------------------------------------------------------------
 
 finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, allow_infinity=False)
+position = st.floats(min_value=-MAX_ABS_POSITION_M, max_value=MAX_ABS_POSITION_M)
 unit_quaternion = st.tuples(*[st.floats(-1.0, 1.0)] * 4).filter(
     lambda q: np.linalg.norm(q) > 0.1).map(lambda q: np.asarray(q) / np.linalg.norm(q))
 
@@ -205,7 +211,7 @@ def datasets(draw: st.DrawFn) -> Dataset:
     def positions() -> np.ndarray | None:
         if not draw(st.booleans()):
             return None
-        return np.array(draw(st.lists(st.tuples(finite, finite, finite), min_size=n, max_size=n)))
+        return np.array(draw(st.lists(st.tuples(position, position, position), min_size=n, max_size=n)))
 
     return Dataset(
         time_s=times, jet_forces_n=forces, base_orientation=base, tip_orientation=tip,
@@ -252,7 +258,8 @@ def stepped_datasets(draw: st.DrawFn) -> Dataset:
     tip = np.array(draw(st.lists(unit_quaternion, min_size=n, max_size=n)))
     return Dataset(time_s=np.cumsum(draw(st.lists(st.sampled_from([0.0, 0.3, 0.7]), min_size=n, max_size=n))),
                    jet_forces_n=forces, base_orientation=np.tile([0.0, 1.0, 0.0, 0.0], (n, 1)), tip_orientation=tip,
-                   tip_position_m=np.array(draw(st.lists(st.tuples(finite, finite, finite), min_size=n, max_size=n))),
+                   tip_position_m=np.array(draw(st.lists(st.tuples(position, position, position), min_size=n,
+                                                         max_size=n))),
                    sweep=np.concatenate([[sweep] * rows for rows, sweep, _ in runs]),
                    step=np.repeat(np.arange(len(runs)) * draw(st.integers(0, 1)), [rows for rows, _, _ in runs]),
                    flags=saturation_flags(forces, PROFILE), profile=PROFILE, source="steps")
