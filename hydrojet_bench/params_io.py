@@ -158,11 +158,16 @@ def calibration_parameter_file(model: str, effects: Sequence[str], fit: Calibrat
     """The parameter file of a calibration on ``rows`` of ``steps`` (chosen by
     ``fit_on``), with its provenance (data, profile, rows fitted, RMS orientation error
     before and after, deg). ``effects``: specs as the file lists them (`effect_specs`)."""
+    errors = dict(zip(fit.names, map(float, fit.standard_errors)))
+    # A standard error the fit could not bound (inf) is no number a reader accepts: the
+    # file lists those parameters as undetermined instead.
+    undetermined = [name for name, error in errors.items() if not np.isfinite(error)]
     return ParameterFile(
         model=model, effects=tuple(effects),
         parameters=dict(zip(fit.names, map(float, fit.values))),
-        standard_errors=dict(zip(fit.names, map(float, fit.standard_errors))),
-        calibration={"data": str(data), "profile": profile.source, "fit_on": fit_on,
+        standard_errors={name: error for name, error in errors.items() if name not in undetermined},
+        calibration={**({"undetermined": undetermined} if undetermined else {}),
+                     "data": str(data), "profile": profile.source, "fit_on": fit_on,
                      "poses": int(np.sum(rows & (steps.sweep == -1))),
                      "sweep_steps": int(np.sum(rows & (steps.sweep >= 0))),
                      "rms_orientation_deg_before": round(fit.rms_orientation_deg_before, 4),

@@ -104,3 +104,25 @@ def test_a_negative_standard_error_is_refused(tmp_path: Path) -> None:
     path.write_text('model = "cosserat"\n[parameters]\n' + NOMINAL_TEXT + "[standard_errors]\nE0 = -1e308\n")
     with pytest.raises(UserError, match="standard_errors.E0 = -1e[+]308 is negative"):
         read_parameter_file(path)
+
+
+def test_a_standard_error_the_fit_could_not_bound_is_listed_as_undetermined(tmp_path: Path) -> None:
+    # It used to be written as inf, which the reader (rightly) refuses: calibrate wrote a
+    # file compare could not read.
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from hydrojet_bench.params_io import calibration_parameter_file
+    from hydrojet_bench.profile import load_profile
+
+    fit = SimpleNamespace(names=tuple(NOMINAL), values=np.array(list(NOMINAL.values())),
+                          standard_errors=np.array([np.inf] + [1e-3] * (len(NOMINAL) - 1)),
+                          rms_orientation_deg_before=2.0, rms_orientation_deg_after=1.0)
+    steps = SimpleNamespace(sweep=np.array([-1, -1, 0]))
+    content = calibration_parameter_file("cosserat", ["gravity"], fit, Path("run.csv"), load_profile("sim"),
+                                         "calibration", steps, np.array([True, True, False]))
+    write_parameter_file(tmp_path / "p.toml", content)
+    read = read_parameter_file(tmp_path / "p.toml")
+    assert read.calibration["undetermined"] == ["E0"] and "E0" not in read.standard_errors
+    assert read.standard_errors["EL"] == 1e-3
