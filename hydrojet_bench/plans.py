@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
+from decimal import Decimal, InvalidOperation
 
 import numpy as np
 
@@ -33,6 +34,14 @@ DEFAULT_SETTLE_S = 5.0
 # on one jet bends the tip about 80 degrees, just past Table II's largest bin (75 deg).
 DEFAULT_MAX_FORCE_N = 0.1
 PAPER_CALIBRATION_POSES = 40
+# The longest a step may hold its command, s. The paper's protocol holds 5 s and a rest
+# or warm-up recording a few minutes; a step held for more than a day is a typo (a
+# unit, a stray exponent), and would keep the jets on and the session going forever.
+MAX_SETTLE_S = 86400.0
+# Sweep and step labels stay below 2**53: they are written to the log's JSON messages,
+# which Foxglove and other JavaScript readers hold as doubles, exact only up to there,
+# and they must fit the recorded data's int64 columns with room to count on.
+LABEL_LIMIT = 2**53
 
 
 def _is_int(value: object) -> bool:
@@ -52,6 +61,8 @@ def _check_settle(name: str, value: float) -> float:
         raise ValueError(f"{name} must be a number of seconds, got {value!r}")
     if not math.isfinite(value) or value <= 0:
         raise ValueError(f"{name} must be a finite time > 0 s, got {value!r}")
+    if value > MAX_SETTLE_S:
+        raise ValueError(f"{name} must be at most {MAX_SETTLE_S:g} s (one day), got {value!r}")
     return float(value)
 
 
@@ -60,9 +71,9 @@ class PlanStep:
     """One quasistatic command.
 
     jet_forces_n: forces (q1, q2, q3) of the three jets, N, each finite and >= 0.
-    sweep: -1 for calibration poses, else the validation sweep's id (>= 0).
-    step: index of this command within its sweep (or calibration set), >= 0.
-    settle_s: how long the command is held before the next one, s (> 0).
+    sweep: -1 for calibration poses, else the validation sweep's id (>= 0), < 2**53.
+    step: index of this command within its sweep (or calibration set), >= 0, < 2**53.
+    settle_s: how long the command is held before the next one, s (> 0, at most a day).
     """
 
     jet_forces_n: tuple[float, float, float]
@@ -82,10 +93,10 @@ class PlanStep:
                 raise ValueError(f"PlanStep.jet_forces_n[q{jet}] must be finite and >= 0 N "
                                  f"(jets only push), got {force!r}")
         object.__setattr__(self, "jet_forces_n", forces)
-        if not _is_int(self.sweep) or self.sweep < CALIBRATION_SWEEP:
-            raise ValueError(f"PlanStep.sweep must be an integer >= -1, got {self.sweep!r}")
-        if not _is_int(self.step) or self.step < 0:
-            raise ValueError(f"PlanStep.step must be an integer >= 0, got {self.step!r}")
+        if not _is_int(self.sweep) or not CALIBRATION_SWEEP <= self.sweep < LABEL_LIMIT:
+            raise ValueError(f"PlanStep.sweep must be an integer >= -1 and < 2**53, got {self.sweep!r}")
+        if not _is_int(self.step) or not 0 <= self.step < LABEL_LIMIT:
+            raise ValueError(f"PlanStep.step must be an integer >= 0 and < 2**53, got {self.step!r}")
         object.__setattr__(self, "sweep", int(self.sweep))
         object.__setattr__(self, "step", int(self.step))
         object.__setattr__(self, "settle_s", _check_settle("PlanStep.settle_s", self.settle_s))
@@ -270,16 +281,38 @@ def _cell_number(value: object, key: str) -> float:
     raise ValueError(f"{key} must be a number, got {value!r}")
 
 
-def _cell_integer(value: object, key: str) -> int:
+def _cell_integer(value: object, key: str, minimum: int) -> int:
+    """A plan cell as an exact integer label in [minimum, 2**53): ``5`` or ``5.0``, but not
+    ``5.5``. CSV text is read as a decimal, not a float, so that 9007199254740993 is not
+    quietly read as its float neighbour."""
     number = _cell_number(value, key)
-    if not number.is_integer():
+    exact: int | float | Decimal = int(value) if _is_int(value) else number  # type: ignore[call-overload]
+    if isinstance(value, str):
+        try:
+            exact = Decimal(value.strip())
+        except InvalidOperation:
+            exact = math.nan
+    if isinstance(exact, Decimal):
+        integral = exact.is_finite() and exact == exact.to_integral_value()
+    else:
+        integral = math.isfinite(exact) and float(exact).is_integer()
+    if not integral:
         raise ValueError(f"{key} must be an integer, got {value!r}")
-    return int(number)
+    # Compared before int(): 1e999999999 is a valid decimal with a billion digits.
+    if not minimum <= exact < LABEL_LIMIT:
+        raise ValueError(f"{key} must be an integer >= {minimum} and < 2**53, got {value!r}")
+    return int(exact)
 
 
 def plan_from_rows(rows: list[dict[str, object]], source: str, default_settle_s: float = DEFAULT_SETTLE_S) -> Plan:
     """A plan from table rows with keys q1, q2, q3 (N), and optionally settle_s (s), sweep
-    and step; ``source`` names the file in errors ("plan.csv, row 3: ...")."""
+    and step; ``source`` names the file in errors ("plan.csv, row 3: ...").
+    ``default_settle_s`` holds the rows without settle_s (a plan file's own default)."""
+    try:
+        default_settle_s = _check_settle("settle_s", _cell_number(default_settle_s, "settle_s"))
+    except ValueError as error:
+        # Not a row's fault: a TOML plan's top-level settle_s.
+        raise ValueError(f"{source}: {error}") from None
     steps = []
     counters: dict[int, int] = {}
     for number, row in enumerate(rows, start=1):
@@ -291,11 +324,11 @@ def plan_from_rows(rows: list[dict[str, object]], source: str, default_settle_s:
         if missing:
             raise ValueError(f"{source}, row {number}: missing {', '.join(missing)} (jet forces, N)")
         try:
-            sweep = _cell_integer(row.get("sweep", 0), "sweep")
-            step = _cell_integer(row.get("step", counters.get(sweep, 0)), "step")
+            sweep = _cell_integer(row.get("sweep", 0), "sweep", CALIBRATION_SWEEP)
+            step = _cell_integer(row.get("step", counters.get(sweep, 0)), "step", 0)
             counters[sweep] = step + 1
             forces = tuple(_cell_number(row[key], key) for key in ("q1", "q2", "q3"))
-            settle_s = _cell_number(row.get("settle_s", default_settle_s), "settle_s")
+            settle_s = _check_settle("settle_s", _cell_number(row.get("settle_s", default_settle_s), "settle_s"))
             steps.append(PlanStep(forces, sweep, step, settle_s))  # type: ignore[arg-type]
         except (TypeError, ValueError) as error:
             raise ValueError(f"{source}, row {number}: {error}") from None
@@ -304,6 +337,6 @@ def plan_from_rows(rows: list[dict[str, object]], source: str, default_settle_s:
     return Plan(tuple(steps))
 
 
-__all__ = ["CALIBRATION_SWEEP", "DEFAULT_MAX_FORCE_N", "DEFAULT_SETTLE_S", "PAPER_CALIBRATION_POSES", "Plan",
-           "PlanStep", "calibration_plan", "hold_plan", "imu_versus_em_plan", "paper_protocol", "plan_from_rows",
-           "validation_sweeps"]
+__all__ = ["CALIBRATION_SWEEP", "DEFAULT_MAX_FORCE_N", "DEFAULT_SETTLE_S", "LABEL_LIMIT", "MAX_SETTLE_S",
+           "PAPER_CALIBRATION_POSES", "Plan", "PlanStep", "calibration_plan", "hold_plan", "imu_versus_em_plan",
+           "paper_protocol", "plan_from_rows", "validation_sweeps"]

@@ -84,12 +84,25 @@ def test_table_names_in_messages_keep_their_brackets(tmp_path, capsys):
 
 @pytest.mark.parametrize(("options", "expected"), [
     (["--seed", "-1"], "--seed must be an integer >= 0, got -1"),
-    (["--time-scale", "1e9"], "--time-scale must be > 0 and at most 1000"),
-    (["--time-scale", "inf"], "--time-scale must be > 0 and at most 1000"),
+    (["--time-scale", "1e9"], "--time-scale must be at least 1 (real time: the devices' timeouts are wall time) and "
+                              "at most 1000 (the simulated rig cannot keep up beyond), got 1000000000.0"),
+    (["--time-scale", "inf"], "--time-scale must be at least 1 "),
+    # Once a traceback from the drivers' sleep (timestamp out of range for time_t).
+    (["--time-scale", "1e-300"], "--time-scale must be at least 1 "),
+    (["--time-scale", "0.5"], "--time-scale must be at least 1 "),
 ])
 def test_run_options_are_blamed_not_the_profile(tmp_path, capsys, options, expected):
     message = one_line_error(capsys, ["run", "--plan", "calibration", "--log", str(tmp_path / "x.mcap"), *options])
     assert message.startswith(expected), message
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def test_a_plan_step_held_for_ever_is_refused_before_the_session(tmp_path, capsys):
+    plan = tmp_path / "plan.csv"
+    plan.write_text("q1,q2,q3,settle_s,sweep,step\n0.05,0,0,1e300,0,0\n")
+    message = one_line_error(capsys, ["run", "--plan", str(plan), "--no-live", "--skip-checks",
+                                      "--log", str(tmp_path / "x.mcap")])
+    assert message == f"{plan}, row 1: settle_s must be at most 86400 s (one day), got 1e+300"
     assert not (tmp_path / "x.mcap").exists()
 
 

@@ -169,3 +169,61 @@ def test_plan_file_mistakes_name_the_file_and_row(tmp_path, name, content, messa
     path.write_bytes(content.encode("latin-1"))
     with pytest.raises(UserError, match=message):
         choose_plan(str(path))
+
+
+@pytest.mark.parametrize(("name", "content", "message"), [
+    # A settle time of 1e300 s held the first command forever.
+    ("plan.csv", "q1,q2,q3,settle_s,sweep,step\n0.05,0,0,1e300,0,0\n",
+     r"plan.csv, row 1: settle_s must be at most 86400 s \(one day\), got 1e\+300"),
+    ("plan.csv", "q1,q2,q3,settle_s\n0.05,0,0,5\n0.05,0,0,86400.5\n", r"plan.csv, row 2: settle_s must be at most"),
+    ("plan.csv", "q1,q2,q3,settle_s\n0.05,0,0,0\n", r"plan.csv, row 1: settle_s must be a finite time > 0 s"),
+    # The file's default is not a row's fault.
+    ("plan.toml", "settle_s = 1e300\n[[step]]\nq1 = 0.05\nq2 = 0\nq3 = 0\n",
+     r"plan.toml: settle_s must be at most 86400 s \(one day\), got 1e\+300"),
+    # Labels beyond int64 crashed the recorder after the jets were commanded.
+    ("plan.csv", "q1,q2,q3,sweep\n0.05,0,0,1e300\n", r"plan.csv, row 1: sweep must be an integer >= -1 and < 2\*\*53"),
+    ("plan.csv", "q1,q2,q3,sweep\n0.05,0,0,9223372036854775808\n", r"plan.csv, row 1: sweep must be an integer >= -1"),
+    ("plan.csv", "q1,q2,q3,step\n0.05,0,0,100000000000000000000\n",
+     r"plan.csv, row 1: step must be an integer >= 0 and < 2\*\*53, got '100000000000000000000'"),
+    ("plan.csv", "q1,q2,q3,step\n0.05,0,0,1e999999999\n", r"plan.csv, row 1: step must be an integer >= 0"),
+    ("plan.toml", "[[step]]\nq1 = 0.05\nq2 = 0\nq3 = 0\nsweep = 9223372036854775807\n",
+     r"plan.toml, row 1: sweep must be an integer >= -1 and < 2\*\*53, got 9223372036854775807"),
+    ("plan.toml", "[[step]]\nq1 = 0.05\nq2 = 0\nq3 = 0\nstep = 1e300\n", r"plan.toml, row 1: step must be an integer"),
+    # Read as a float, these were quietly taken for their neighbour ...992 or ...496.
+    ("plan.csv", "q1,q2,q3,step\n0.05,0,0,9007199254740993\n", r"plan.csv, row 1: step must be an integer >= 0"),
+    ("plan.toml", "[[step]]\nq1 = 0.05\nq2 = 0\nq3 = 0\nstep = 9007199254740993\n", r"plan.toml, row 1: step must"),
+    ("plan.csv", "q1,q2,q3,step\n0.05,0,0,4503599627370496.5\n",
+     r"plan.csv, row 1: step must be an integer, got '4503599627370496.5'"),
+    ("plan.csv", "q1,q2,q3,step\n0.05,0,0,nan\n", r"plan.csv, row 1: step must be an integer, got 'nan'"),
+])
+def test_implausible_settle_times_and_labels_name_the_file_row_and_field(tmp_path, name, content, message):
+    path = tmp_path / name
+    path.write_text(content)
+    with pytest.raises(UserError, match=message):
+        choose_plan(str(path))
+
+
+def test_whole_labels_are_read_exactly_and_written_decimals_still_count(tmp_path):
+    path = tmp_path / "plan.csv"
+    path.write_text("q1,q2,q3,sweep,step,settle_s\n0.05,0,0,5.0,3.0,86400\n0.05,0,0,-1,1e3,5\n0.05,0,0,-1.0,1001,5\n"
+                    "0.05,0,0,9007199254740991,4503599627370497,5\n")
+    plan = choose_plan(str(path))
+    assert [(s.sweep, s.step) for s in plan] == [(5, 3), (-1, 1000), (-1, 1001), (2**53 - 1, 2**52 + 1)]
+    assert plan[0].settle_s == 86400.0
+    toml = tmp_path / "plan.toml"
+    toml.write_text("[[step]]\nq1 = 0.05\nq2 = 0\nq3 = 0\nsweep = 5.0\nstep = 2.0\n"
+                    "[[step]]\nq1 = 0.05\nq2 = 0\nq3 = 0\nsweep = 5\n")
+    assert [(s.sweep, s.step) for s in choose_plan(str(toml))] == [(5, 2), (5, 3)]
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: PlanStep((0.0, 0.0, 0.0), 2**53, 0), r"PlanStep.sweep must be an integer >= -1 and < 2\*\*53"),
+    (lambda: PlanStep((0.0, 0.0, 0.0), 0, 2**63), r"PlanStep.step must be an integer >= 0 and < 2\*\*53"),
+    (lambda: PlanStep((0.0, 0.0, 0.0), 0, 0, 1e300), r"PlanStep.settle_s must be at most 86400 s"),
+    (lambda: calibration_plan(settle_s=86401.0), "settle_s must be at most 86400 s"),
+    (lambda: validation_sweeps(settle_s=1e300), "settle_s must be at most 86400 s"),
+    (lambda: choose_plan("hold:1e300"), r"plan 'hold:1e300': .*settle_s must be at most 86400 s"),
+])
+def test_steps_built_in_code_have_the_same_bounds(call, message):
+    with pytest.raises((ValueError, UserError), match=message):
+        call()

@@ -23,7 +23,7 @@ import msgspec
 import numpy as np
 from rich.console import Console
 
-from ..config.schema import MAX_TIME_SCALE
+from ..config.schema import MAX_TIME_SCALE, MIN_TIME_SCALE
 from ..errors import UserError
 from ..files import check_writable_target, create_numbered, make_folder_for
 from ..model_choice import ModelDefaults, model_choice
@@ -86,9 +86,10 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
     profile = load_profile(args.profile)
     settings = profile.config
     if args.time_scale is not None:
-        if not 0 < args.time_scale <= MAX_TIME_SCALE:
-            raise UserError(f"--time-scale must be > 0 and at most {MAX_TIME_SCALE:g} (the simulated rig "
-                            f"cannot keep up beyond), got {args.time_scale}")
+        if not MIN_TIME_SCALE <= args.time_scale <= MAX_TIME_SCALE:
+            raise UserError(f"--time-scale must be at least {MIN_TIME_SCALE:g} (real time: the devices' timeouts "
+                            f"are wall time) and at most {MAX_TIME_SCALE:g} (the simulated rig cannot keep up "
+                            f"beyond), got {args.time_scale}")
         if not settings.transports.simulated and args.time_scale != 1.0:
             raise UserError("--time-scale applies to the simulated rig only; this profile drives real devices")
         settings = msgspec.structs.replace(settings, session=msgspec.structs.replace(settings.session,

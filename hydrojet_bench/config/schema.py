@@ -47,6 +47,7 @@ from drivers.valve.protocol import DUTY_MAX_PERMILLE
 from ..models import MODELS
 from ..params import (JET_COUNT, MAX_PLAUSIBLE_JET_FORCE_N, CapsuleParameters, JetLayout, RodParameters,
                       check_plausible, check_within)
+from ..plans import MAX_SETTLE_S
 
 # Device transports in [transports]: "sim" serves an in-process emulator on the digital
 # twin, "pty" the same emulator on a pseudo-terminal (the serial code path).
@@ -353,13 +354,20 @@ class ValvesTable(Table, kw_only=True):
 # Beyond this the simulated devices' loops fall behind the session clock (measured: at
 # x3000 a 1 s plan takes 1700 s of session time and no step is estimated).
 MAX_TIME_SCALE = 1000.0
+# Never slower than real time: the drivers' timeouts are wall time while their waits are
+# session time, so below x1 the simulated IMUs' start-up overruns them (measured on the
+# sim profile: x0.5 fails "estimate_gyro_bias did not finish within 15 s", x0.1
+# "initialize did not finish within 5 s", x1e-300 overflows the OS's sleep), and the
+# physical rig runs at x1 only.
+MIN_TIME_SCALE = 1.0
 
 
 class SessionTable(Table, kw_only=True):
-    settle_s: Positive = 5.0          # hold each command this long, session s (the paper: 5 s)
+    # hold each command this long, session s (the paper: 5 s; at most a day, as in plans)
+    settle_s: Annotated[float, msgspec.Meta(gt=0.0, le=MAX_SETTLE_S)] = 5.0
     window_s: Positive = 1.0          # average the last window_s of each step, session s
     # session seconds per wall second (> 1 only on the sim rig)
-    time_scale: Annotated[float, msgspec.Meta(gt=0.0, le=MAX_TIME_SCALE)] = 1.0
+    time_scale: Annotated[float, msgspec.Meta(ge=MIN_TIME_SCALE, le=MAX_TIME_SCALE)] = 1.0
     # Log flush period, session s: what a crash may lose. The session's log compresses
     # and indexes each chunk on its writer thread, which holds the interpreter for part
     # of it, so a chunk must stay small in wall time too: on the simulated rig at 25x a

@@ -90,6 +90,15 @@ def test_bad_options_are_user_errors(session_log, capsys):
     assert "--settle" in capsys.readouterr().err
 
 
+def test_a_max_gap_beyond_a_minute_is_refused_before_the_log_is_read(tmp_path, capsys):
+    missing = tmp_path / "none.mcap"
+    assert main(["sensors", str(missing), "--max-gap", "1e308"]) == 2  # printed "gaps up to inf ms", exit 0
+    assert " ".join(capsys.readouterr().err.split()) == ("error: --max-gap must be at most 60 s (a longer EM gap "
+                                                         "spans several plan steps), got 1e+308")
+    assert main(["sensors", str(missing), "--max-gap", "60"]) == 2  # the limit passes: the log is blamed
+    assert "--max-gap" not in capsys.readouterr().err
+
+
 def test_a_log_without_calibration_poses_is_reported_not_a_traceback(tmp_path, capsys):
     log = tmp_path / "hold.mcap"
     assert main(["run", "--plan", "hold:2", "--no-live", "--time-scale", "20", "--log", str(log)]) == 0
