@@ -26,8 +26,9 @@
     sizes = [[2.0, 1.0], [6.0, -3.0]] # each size: the error's values (as simulate --hidden)
     orientations = ["horizontal"]     # optional: only these of the study's orientations
 
-Every size is checked against the effect parameter's bounds; a mistake is a
-`UserError` naming the file and the dotted key.
+Every size is checked against the effect parameter's bounds, and a study's size against
+`MAX_SIZES` per axis, `MAX_NOISE_SCALE` and `MAX_CELLS`; a mistake is a `UserError`
+naming the file and the dotted key.
 """
 
 from __future__ import annotations
@@ -45,7 +46,18 @@ from ..models import MODELS
 from ..twin.setup_errors import parse_setup_error, setup_error_text
 
 Orientation = Literal["hanging", "horizontal"]
-Positive = Annotated[float, msgspec.Meta(gt=0.0)]
+
+# Sizes on one swept axis: each is a cell per seed, model, ...; 10,000 is already days of
+# one worker, and a larger num is a typo that fills memory before a cell runs.
+MAX_SIZES = 10_000
+# Cells of a study: tens of seconds each, so 100,000 is weeks of one worker or most of a
+# day on a 100-worker cluster (the shipped studies have at most 540); more is a typo.
+MAX_CELLS = 100_000
+# Multiples of the profile's sensor noise: 1000 x the paper's EM noise is 0.5 m and 700
+# degrees RMS, readings that say nothing of the rod; far larger ones overflow to inf.
+MAX_NOISE_SCALE = 1000.0
+# The rows keep the seed in an int64 column.
+MAX_SEED = 2**63 - 1
 
 
 class SizeRange(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
@@ -54,8 +66,21 @@ class SizeRange(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
 
     start: float
     stop: float
-    num: Annotated[int, msgspec.Meta(ge=1)]
+    num: int
     scale: Literal["log", "linear"] = "linear"
+
+    def __post_init__(self) -> None:
+        # msgspec reports these at the range's key; each message starts with the field.
+        if not 1 <= self.num <= MAX_SIZES:
+            raise ValueError(f"num must be from 1 to {MAX_SIZES} sizes on one axis, got {self.num}")
+        for name in ("start", "stop"):
+            if not np.isfinite(getattr(self, name)):
+                raise ValueError(f"{name} must be a finite number, got {getattr(self, name)}")
+        # Not start * stop > 0: 1e-200 * 1e-200 underflows to 0.
+        if self.scale == "log" and (self.start == 0.0 or self.stop == 0.0
+                                    or (self.start > 0.0) != (self.stop > 0.0)):
+            raise ValueError(f"start and stop of a log scale must be nonzero and of one sign, got "
+                             f"{self.start} and {self.stop}")
 
     def values(self) -> tuple[float, ...]:
         if self.scale == "log":
@@ -87,8 +112,10 @@ class StudySpec(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
     orientations: Annotated[list[Orientation], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: ["hanging"])
     plans: Annotated[list[str], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: ["short"])
     models: Annotated[list[str], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: ["cosserat"])
-    seeds: Annotated[list[Annotated[int, msgspec.Meta(ge=0)]], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: [0])
-    noise_scales: Annotated[list[Positive], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: [1.0])
+    # Their bounds are checked in load_study: msgspec's words for a bad item of a list
+    # do not say the bound.
+    seeds: Annotated[list[int], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: [0])
+    noise_scales: Annotated[list[float], msgspec.Meta(min_length=1)] = msgspec.field(default_factory=lambda: [1.0])
     none: bool = True
     effects: list[EffectSweep] = []
     pairs: list[EffectPair] = []
@@ -122,6 +149,14 @@ def load_study(path: Path) -> Study:
     source = str(path)
     spec = convert(read_toml(path, "study spec"), StudySpec, source)
     folder = path.parent
+    for index, seed in enumerate(spec.seeds):
+        if not 0 <= seed <= MAX_SEED:
+            raise UserError(f"{source}: seeds[{index}] must be an integer from 0 to 2**63 - 1 (rows store it as "
+                            f"int64), got {seed}")
+    for index, scale in enumerate(spec.noise_scales):
+        if not 0.0 < scale <= MAX_NOISE_SCALE:
+            raise UserError(f"{source}: noise_scales[{index}] must be > 0 and at most {MAX_NOISE_SCALE:g} (times the "
+                            f"profile's sensor noise; beyond, the readings say nothing), got {scale}")
     for index, model in enumerate(spec.models):
         if model not in MODELS:
             raise UserError(f"{source}: models[{index}] = {model!r} is no model; known: {', '.join(MODELS)}")
@@ -136,6 +171,8 @@ def load_study(path: Path) -> Study:
         sizes = sweep.sizes.values() if isinstance(sweep.sizes, SizeRange) else tuple(sweep.sizes)
         if not sizes:
             raise UserError(f"{source}: {key}.sizes is empty")
+        if len(sizes) > MAX_SIZES:
+            raise UserError(f"{source}: {key}.sizes has {len(sizes)} sizes, more than {MAX_SIZES} on one axis")
         for size in sizes:
             _check_bounds(parameter, size, source, f"{key}.sizes")
         fixed = []
@@ -169,6 +206,7 @@ def load_study(path: Path) -> Study:
             except UserError as error:
                 raise UserError(f"{source}: setup[{index}].sizes[{number}]: {error}") from None
             setups.append((sweep.error, tuple(size), tuple(sweep.orientations)))
+    _check_cell_count(spec, sum(len(sweep[2]) for sweep in sweeps) + len(pairs), setups, source)
     return Study(name=spec.name or path.stem, source=source, profiles=profiles,
                  orientations=tuple(spec.orientations), plans=plans, models=tuple(spec.models),
                  seeds=tuple(spec.seeds), noise_scales=tuple(spec.noise_scales), none=spec.none,
@@ -209,3 +247,14 @@ def _check_bounds(parameter, value: float, source: str, key: str) -> None:
     if not parameter.lower <= value <= parameter.upper:
         raise UserError(f"{source}: {key}: {value} is outside {parameter.name}'s bounds "
                         f"[{parameter.lower}, {parameter.upper}] {parameter.unit}")
+
+
+def _check_cell_count(spec: StudySpec, scenarios: int, setups: list, source: str) -> None:
+    """At most `MAX_CELLS`, counted as `cells.expand` makes them (before it makes them)."""
+    per_orientation = len(spec.profiles) * len(spec.plans) * len(spec.models) * len(spec.noise_scales) * len(spec.seeds)
+    runs = (int(spec.none) + scenarios) * len(spec.orientations)
+    runs += sum(len(orientations) or len(spec.orientations) for _, _, orientations in setups)
+    cells = runs * per_orientation
+    if cells > MAX_CELLS:
+        raise UserError(f"{source}: {cells} cells (scenarios x orientations x profiles x plans x models x "
+                        f"noise_scales x seeds) is more than {MAX_CELLS} in one study; split it or shorten a list")

@@ -35,6 +35,17 @@ from ..geometry import so3_exp
 from ..params import JET_COUNT
 
 CORRECT_WIRING = (1, 2, 3)
+# Limits of a rig set up wrongly, not of another rig; `effects.setup` fits its setup
+# errors within 0.8 rad (46 degrees) alike, and past them the diagnosing models stop
+# solving (measured on the short plan: study cells at the limits below run; a 90 degree
+# tilt, a half-turn base sensor or a doubled jet force on the hanging rod fail).
+# A field generator on a 45 degree ramp, about either axis:
+TILT_LIMIT_DEG = 45.0
+# A base sensor turned in its clamp, per component of the rotation vector:
+ROTVEC_LIMIT_RAD = 0.8
+# Millinewtons entered as N (the smallest slip of `effects.setup.FORCE_UNIT_MISTAKES`) up
+# to half again the command; the valves clip a table in a larger unit rather than push more.
+JET_FORCE_SCALE_LIMITS = (1e-3, 1.5)
 
 
 @dataclass(frozen=True)
@@ -54,6 +65,10 @@ class SetupErrors:
         scale = float(self.jet_force_scale)
         if not (math.isfinite(scale) and scale > 0.0):
             raise ValueError(f"SetupErrors.jet_force_scale must be a finite number > 0, got {self.jet_force_scale!r}")
+        low, high = JET_FORCE_SCALE_LIMITS
+        if not low <= scale <= high:
+            raise ValueError(f"SetupErrors.jet_force_scale must be from {low:g} (millinewtons entered as N) to "
+                             f"{high:g} (half again the command), got {self.jet_force_scale!r}")
         object.__setattr__(self, "jet_force_scale", scale)
         wiring = tuple(self.jet_wiring)
         if sorted(wiring) != list(CORRECT_WIRING) or any(isinstance(j, bool) for j in wiring):
@@ -64,6 +79,14 @@ class SetupErrors:
             if len(values) != size or not all(math.isfinite(v) for v in values):
                 raise ValueError(f"SetupErrors.{name} must be {size} finite numbers, got {getattr(self, name)!r}")
             object.__setattr__(self, name, values)
+        if any(abs(v) > TILT_LIMIT_DEG for v in self.tracker_tilt_deg):
+            raise ValueError(f"SetupErrors.tracker_tilt_deg must be angles from {-TILT_LIMIT_DEG:g} to "
+                             f"{TILT_LIMIT_DEG:g} degrees (a field generator on a ramp; more is another rig), "
+                             f"got {self.tracker_tilt_deg!r}")
+        if any(abs(v) > ROTVEC_LIMIT_RAD for v in self.base_sensor_rotvec_rad):
+            raise ValueError(f"SetupErrors.base_sensor_rotvec_rad must be 3 components from {-ROTVEC_LIMIT_RAD:g} to "
+                             f"{ROTVEC_LIMIT_RAD:g} rad (46 degrees; more is another rig, or degrees typed as "
+                             f"radians), got {self.base_sensor_rotvec_rad!r}")
 
     @property
     def any(self) -> bool:

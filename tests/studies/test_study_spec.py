@@ -34,6 +34,21 @@ from hydrojet_bench.studies.spec import load_study
     ('[[setup]]\nerror = "jet_force_sign"\nsizes = [[-1]]\norientations = ["horizontal"]\n',
      "setup[0].orientations[0] = 'horizontal' is not among the study's orientations (hanging)"),
     ('[[pairs]]\neffects = ["jet_gain"]\n', "pairs[0].effects"),
+    # Absurd sizes are refused here, not left to fail (or fill memory) in every cell.
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = {start = 0.0, stop = 1.0, num = 3, '
+     'scale = "log"}\n', "effects[0].sizes.start and stop of a log scale must be nonzero and of one sign"),
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = {start = 0.5, stop = 1.0, num = 10001}\n',
+     "effects[0].sizes.num must be from 1 to 10000 sizes on one axis, got 10001"),
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = {start = nan, stop = 1.0, num = 3}\n',
+     "effects[0].sizes.start must be a finite number"),
+    ('noise_scales = [1e308]\n', "noise_scales[0] must be > 0 and at most 1000"),
+    ('noise_scales = [1.0, 0.0]\n', "noise_scales[1] must be > 0"),
+    ('seeds = [0, 99999999999999999999]\n', "seeds[1] must be an integer from 0 to 2**63 - 1"),
+    ('seeds = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9]\n[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\n'
+     'sizes = {start = 0.5, stop = 1.0, num = 10000}\n', "100010 cells (scenarios x orientations"),
+    ('none = false\n[[setup]]\nerror = "tracker_tilt_deg"\nsizes = [[1e308, 0.0]]\n',
+     "setup[0].sizes[0]: setup error 'tracker_tilt_deg=1e+308,0': SetupErrors.tracker_tilt_deg must be angles "
+     "from -45 to 45 degrees"),
 ])
 def test_spec_mistakes_name_file_and_key(tmp_path: Path, body: str, message: str):
     spec = write_spec(tmp_path, body, "bad.toml")
@@ -41,6 +56,19 @@ def test_spec_mistakes_name_file_and_key(tmp_path: Path, body: str, message: str
         load_study(spec)
     text = str(caught.value)
     assert text.startswith(str(spec)) and message in text and "\n" not in text
+
+
+def test_a_study_at_its_limits_loads(tmp_path: Path):
+    spec = write_spec(tmp_path, 'noise_scales = [1000.0]\nseeds = [0, 9223372036854775807]\n'
+                                '[[effects]]\neffect = "base_compliance"\nparameter = "compliance_rad_per_nm"\n'
+                                'sizes = {start = -1e-200, stop = -1e-190, num = 3, scale = "log"}\n'
+                                '[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\n'
+                                'sizes = {start = 0.5, stop = 1.0, num = 10000}\n')
+    with pytest.raises(UserError, match="-1e-200 is outside"):  # the range is fine, the parameter's bounds are not
+        load_study(spec)
+    spec.write_text(spec.read_text().replace("-1e-200, stop = -1e-190", "1e-200, stop = 1e-190"))
+    study = load_study(spec)
+    assert len(expand(study)) == 2 * (1 + 3 + 10000) and study.noise_scales == (1000.0,)
 
 
 def test_a_spec_mistake_on_the_command_line_is_one_line(tmp_path: Path):
@@ -85,3 +113,18 @@ def test_the_setup_study_has_every_setup_error_and_the_hypothesis_it_should_name
     # A [[setup]] naming orientations runs on those only.
     assert {cell.orientation for cell in cells if cell.setup[0] == "jet_force_scale"} == {"horizontal"}
     assert {cell.orientation for cell in cells if cell.setup[0] != "jet_force_scale"} == {"hanging"}
+
+
+@pytest.mark.parametrize("name", ["library-quick", "library", "plans", "setup", "smoke"])
+def test_the_cell_limit_counts_the_cells_the_study_expands_to(name: str, monkeypatch: pytest.MonkeyPatch):
+    # The limit is checked before any cell is made, by a count of its own: it must be
+    # the number `expand` makes, or a study at the limit is refused or let through wrongly.
+    from hydrojet_bench.studies import spec as spec_module
+
+    path = Path(__file__).parents[2] / "docs" / "studies" / f"{name}.toml"
+    cells = len(expand(load_study(path)))
+    monkeypatch.setattr(spec_module, "MAX_CELLS", cells)
+    load_study(path)
+    monkeypatch.setattr(spec_module, "MAX_CELLS", cells - 1)
+    with pytest.raises(UserError, match=f"{cells} cells"):
+        load_study(path)

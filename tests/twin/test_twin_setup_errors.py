@@ -72,14 +72,32 @@ def test_setup_errors_parse_as_simulate_takes_them():
                           ("jet_force_scale=1", "would hide nothing; give jet_force_scale another value"),
                           ("jet_wiring=1,2,3", "would hide nothing; give jet_wiring another value"),
                           ("base_sensor_rotvec=0,0", "takes 3 comma-separated numbers, got 2"),
-                          ("tracker_tilt_deg=a,b", "takes 2 comma-separated numbers")):
+                          ("tracker_tilt_deg=a,b", "takes 2 comma-separated numbers"),
+                          # Finite but past a rig set up wrongly: gravity or the readings turned nan, or the
+                          # diagnosing models stopped solving.
+                          ("tracker_tilt_deg=1e308,0", "tracker_tilt_deg must be angles from -45 to 45 degrees"),
+                          ("tracker_tilt_deg=0,-90", "tracker_tilt_deg must be angles from -45 to 45 degrees"),
+                          ("base_sensor_rotvec=1e308,0,0", "base_sensor_rotvec_rad must be 3 components from -0.8 "
+                                                           "to 0.8 rad"),
+                          ("base_sensor_rotvec=0,0,-3.14", "base_sensor_rotvec_rad must be 3 components"),
+                          ("jet_force_scale=2", r"jet_force_scale must be from 0.001 .* to 1.5 "),
+                          ("jet_force_scale=1e-4", "jet_force_scale must be from 0.001")):
         with pytest.raises(UserError, match=message):
             parse_setup_error(text)
+    # The limits themselves are rigs set up wrongly.
+    assert SetupErrors(tracker_tilt_deg=(45.0, -45.0)).tracker_tilt_deg == (45.0, -45.0)
+    assert SetupErrors(base_sensor_rotvec_rad=(0.8, -0.8, 0.8)).any
+    assert SetupErrors(jet_force_scale=1e-3).any and SetupErrors(jet_force_scale=1.5).any
 
 
-def test_simulate_refuses_a_bad_setup_error_in_one_line(tmp_path):
+@pytest.mark.parametrize(("hidden", "message"), [
+    ("jet_wiring=1,2,2", "SetupErrors.jet_wiring must be a permutation of 1, 2, 3, got (1, 2, 2)"),
+    # Finite, but it turned gravity nan deep in the twin (a traceback, exit 1).
+    ("tracker_tilt_deg=1e308,0", "SetupErrors.tracker_tilt_deg must be angles from -45 to 45 degrees (a field "
+                                 "generator on a ramp; more is another rig), got (1e+308, 0.0)"),
+])
+def test_simulate_refuses_a_bad_setup_error_in_one_line(tmp_path, hidden: str, message: str):
     done = subprocess.run([sys.executable, "-m", "hydrojet_bench.cli", "simulate", "-o", str(tmp_path / "x.csv"),
-                           "--hidden", "jet_wiring=1,2,2"], capture_output=True, text=True, timeout=120)
+                           "--hidden", hidden], capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and "Traceback" not in done.stderr
-    assert done.stderr.strip().splitlines() == [
-        "error: setup error 'jet_wiring=1,2,2': SetupErrors.jet_wiring must be a permutation of 1, 2, 3, got (1, 2, 2)"]
+    assert done.stderr.strip().splitlines() == [f"error: setup error {hidden!r}: {message}"]
