@@ -94,10 +94,9 @@ def _smallest(sizes: pd.Series, default: float) -> float:
 def summary_markdown(rows: pd.DataFrame) -> str:
     failed = rows[rows["error"].notna()]
     finished = rows[rows["error"].isna()]
-    lines = ["# Study summary", "",
-             f"{len(rows)} cells: {len(finished)} diagnosed, {len(failed)} failed; "
-             f"{finished['seconds'].mean() if len(finished) else float('nan'):.1f} s per cell on average "
-             f"(one worker's time).", ""]
+    timing = (f"; {finished['seconds'].mean():.1f} s per cell on average (one worker's time)" if len(finished)
+              else "")
+    lines = ["# Study summary", "", f"{len(rows)} cells: {len(finished)} diagnosed, {len(failed)} failed{timing}.", ""]
     if len(finished):
         right = finished[finished["kind"] != "pair"]["detected"].mean()
         lines += [f"Right verdicts (single effects and none): {right:.0%}.", ""]
