@@ -46,7 +46,11 @@ def test_user_mistakes_are_one_line_without_traceback(tmp_path):
     for args, message in (
         (["perf", "--runs", "10"], "--runs must be at least 200"),
         (["calibrate", str(tmp_path / "missing.csv"), "--position-weight", "-1", "-o", str(tmp_path / "p.toml")],
-         "--position-weight must be >= 0"),
+         "--position-weight must be from 0 to 10000 rad per m"),
+        (["calibrate", str(tmp_path / "missing.csv"), "--position-weight", "1e308", "-o", str(tmp_path / "p.toml")],
+         "--position-weight must be from 0 to 10000 rad per m"),
+        (["run", "--plan", "hold:1e300", "--log", str(tmp_path / "h.mcap")],
+         "plan 'hold:1e300': hold:SECONDS takes a number of seconds > 0 and at most 86400 (one day)"),
         (["perf", "--runs", "200", "--no-session", "--json", str(tmp_path / "missing" / "out.json")], "cannot write"),
     ):
         result = run_cli(*args)

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from ..config.loading import read_toml
 from ..errors import UserError
-from ..plans import (DEFAULT_SETTLE_S, Plan, calibration_plan, hold_plan, imu_versus_em_plan, paper_protocol,
+from ..plans import (DEFAULT_SETTLE_S, MAX_SETTLE_S, Plan, calibration_plan, hold_plan, imu_versus_em_plan, paper_protocol,
                      plan_from_rows, validation_sweeps)
 
 BUILT_IN = ("paper", "calibration", "sweeps", "imu-vs-em", "hold")
@@ -51,7 +51,8 @@ def choose_plan(spec: str, settle_s: float = DEFAULT_SETTLE_S, seed: int = 0) ->
         try:
             return hold_plan(duration_s=float(argument) if argument else 60.0)
         except ValueError as error:
-            raise UserError(f"plan {spec!r}: hold:SECONDS takes a positive number of seconds ({error})") from None
+            raise UserError(f"plan {spec!r}: hold:SECONDS takes a number of seconds > 0 and at most "
+                            f"{MAX_SETTLE_S:g} (one day), got {argument!r} ({error})") from None
     path = Path(spec)
     if not path.is_file():
         raise UserError(f"plan {spec!r}: neither a built-in plan ({', '.join(BUILT_IN)}) nor an existing file")

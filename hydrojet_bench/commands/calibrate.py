@@ -30,6 +30,12 @@ from .next_steps import command, input_words, print_next
 from .log_notice import warn_if_incomplete, warn_if_recorded_elsewhere
 
 
+# Past this the orientations no longer count (a millimetre weighs ten radians) and the
+# residuals overflow before the weight is absurd enough to be noticed (1e308 gave "array
+# must not contain infs or NaNs" about the data file).
+MAX_POSITION_WEIGHT_RAD_PER_M = 1e4
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("calibrate", help="fit model parameters to the calibration poses")
     add_input_arguments(parser)
@@ -47,8 +53,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if not args.position_weight >= 0:
-        raise UserError(f"--position-weight must be >= 0, got {args.position_weight}")
+    if not 0 <= args.position_weight <= MAX_POSITION_WEIGHT_RAD_PER_M:
+        raise UserError(f"--position-weight must be from 0 to {MAX_POSITION_WEIGHT_RAD_PER_M:g} rad per m (there, "
+                        f"a millimetre outweighs ten radians), got {args.position_weight}")
     choice = model_choice(args)  # validates --effect before the data is read
     model = choice.model
     profile, steps = load_steps(args.input, args.profile)

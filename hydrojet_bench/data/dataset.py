@@ -196,7 +196,8 @@ class Dataset:
         backwards = np.diff(time) < 0.0
         if np.any(backwards):
             i = int(np.argmax(backwards)) + 1
-            raise ValueError(f"Dataset.time_s row {i}: time goes backwards ({time[i]!r} s after {time[i - 1]!r} s)")
+            raise ValueError(f"Dataset.time_s row {i}: time goes backwards ({float(time[i])!r} s after "
+                             f"{float(time[i - 1])!r} s)")
         arrays: dict[str, np.ndarray | None] = {"time_s": time}
         arrays["jet_forces_n"] = _float_array("jet_forces_n", self.jet_forces_n, (3,), rows, MAX_JET_FORCE_N, "N")
         for name in ("base_orientation", "tip_orientation"):

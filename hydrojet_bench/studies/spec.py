@@ -157,6 +157,8 @@ def load_study(path: Path) -> Study:
         if not 0.0 < scale <= MAX_NOISE_SCALE:
             raise UserError(f"{source}: noise_scales[{index}] must be > 0 and at most {MAX_NOISE_SCALE:g} (times the "
                             f"profile's sensor noise; beyond, the readings say nothing), got {scale}")
+    for key in ("profiles", "orientations", "plans", "models", "seeds", "noise_scales"):
+        _check_no_repeats(getattr(spec, key), source, key)
     for index, model in enumerate(spec.models):
         if model not in MODELS:
             raise UserError(f"{source}: models[{index}] = {model!r} is no model; known: {', '.join(MODELS)}")
@@ -173,6 +175,7 @@ def load_study(path: Path) -> Study:
             raise UserError(f"{source}: {key}.sizes is empty")
         if len(sizes) > MAX_SIZES:
             raise UserError(f"{source}: {key}.sizes has {len(sizes)} sizes, more than {MAX_SIZES} on one axis")
+        _check_no_repeats(sizes, source, f"{key}.sizes")
         for size in sizes:
             _check_bounds(parameter, size, source, f"{key}.sizes")
         fixed = []
@@ -196,6 +199,7 @@ def load_study(path: Path) -> Study:
         pairs.append((specs, tuple(sorted(pair.values.items()))))
     setups = []
     for index, sweep in enumerate(spec.setup):
+        _check_no_repeats([tuple(size) for size in sweep.sizes], source, f"setup[{index}].sizes")
         for number, orientation in enumerate(sweep.orientations):
             if orientation not in spec.orientations:
                 raise UserError(f"{source}: setup[{index}].orientations[{number}] = {orientation!r} is not among the "
@@ -247,6 +251,15 @@ def _check_bounds(parameter, value: float, source: str, key: str) -> None:
     if not parameter.lower <= value <= parameter.upper:
         raise UserError(f"{source}: {key}: {value} is outside {parameter.name}'s bounds "
                         f"[{parameter.lower}, {parameter.upper}] {parameter.unit}")
+
+
+def _check_no_repeats(values, source: str, key: str) -> None:
+    """A list entry given twice would make cells of the same name, one result hiding the other."""
+    seen = set()
+    for index, value in enumerate(values):
+        if value in seen:
+            raise UserError(f"{source}: {key}[{index}] = {value!r} repeats an earlier entry (cells are named by it)")
+        seen.add(value)
 
 
 def _check_cell_count(spec: StudySpec, scenarios: int, setups: list, source: str) -> None:

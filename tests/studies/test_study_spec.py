@@ -42,6 +42,9 @@ from hydrojet_bench.studies.spec import load_study
     ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = {start = nan, stop = 1.0, num = 3}\n',
      "effects[0].sizes.start must be a finite number"),
     ('noise_scales = [1e308]\n', "noise_scales[0] must be > 0 and at most 1000"),
+    ('seeds = [0, 1, 0]\n', "seeds[2] = 0 repeats an earlier entry"),
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.7, 0.7]\n',
+     "effects[0].sizes[1] = 0.7 repeats an earlier entry"),
     ('noise_scales = [1.0, 0.0]\n', "noise_scales[1] must be > 0"),
     ('seeds = [0, 99999999999999999999]\n', "seeds[1] must be an integer from 0 to 2**63 - 1"),
     ('seeds = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9]\n[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\n'
