@@ -128,7 +128,7 @@ offset_in_tip_m = [0.0, 0.0, 0.01]
         (MINIMAL + "[tip_sensor]\noffset_in_tip_m = [0, 0]\n", "tip_sensor.offset_in_tip_m",
          "a list of 3 finite numbers"),
         ("rod = 3\n" + MINIMAL, "rod", "must be a table"),
-        ("answer = 42\n" + MINIMAL, "answer", "is not a known key (a profile takes name, "),
+        ("answer = 42\n" + MINIMAL, "answer", "is not a known key (the top level takes name, "),
         (MINIMAL + "name = 7\n", "gravity.name", "not a known key"),
         ("name = 7\n" + MINIMAL, "name", "must be a string"),
     ],

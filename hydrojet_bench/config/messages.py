@@ -147,7 +147,7 @@ def _suggestion(field: str, schema: type, parts: list[str | int | None]) -> str:
     known = list(table.__struct_fields__)
     close = difflib.get_close_matches(field, known, n=1, cutoff=0.75)
     hint = f"; did you mean {close[0]}?" if close else ""
-    where = f"[{_dotted(parts)}]" if parts else "a profile"
+    where = f"[{_dotted(parts)}]" if parts else "the top level"
     return f"{hint} ({where} takes {', '.join(known)})"
 
 
