@@ -29,6 +29,10 @@ JET_COUNT = 3
 # beyond ~10 N the nominal rod has no static equilibrium the models can find (measured:
 # 10 N on one jet converges, 20 N does not). A larger limit in a file is a typo.
 MAX_PLAUSIBLE_JET_FORCE_N = 10.0
+# The farthest a rig point plausibly lies from the tracker's origin, per axis, m: a
+# tracker's field is a metre across. Finite yet far larger is a unit slip, and the frame
+# arithmetic overflows on the largest.
+MAX_PLAUSIBLE_POSITION_M = 10.0
 
 
 def _check_finite(owner: str, name: str, value: float) -> None:

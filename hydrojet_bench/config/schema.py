@@ -45,8 +45,8 @@ from drivers.valve.calibration import JetCalibration
 from drivers.valve.protocol import DUTY_MAX_PERMILLE
 
 from ..models import MODELS
-from ..params import (JET_COUNT, MAX_PLAUSIBLE_JET_FORCE_N, CapsuleParameters, JetLayout, RodParameters,
-                      check_plausible, check_within)
+from ..params import (JET_COUNT, MAX_PLAUSIBLE_JET_FORCE_N, MAX_PLAUSIBLE_POSITION_M, CapsuleParameters, JetLayout,
+                      RodParameters, check_plausible, check_within)
 from ..plans import MAX_SETTLE_S
 
 # Device transports in [transports]: "sim" serves an in-process emulator on the digital
@@ -143,7 +143,7 @@ class BaseTable(Table, kw_only=True):
 
     def __post_init__(self) -> None:
         check_unit_quaternion("orientation_in_tracker", self.orientation_in_tracker)
-        _check_vector_within("position_in_tracker_m", self.position_in_tracker_m, 10.0)
+        _check_vector_within("position_in_tracker_m", self.position_in_tracker_m, MAX_PLAUSIBLE_POSITION_M)
 
 
 class BaseSensorTable(Table, kw_only=True):

@@ -58,8 +58,9 @@ import numpy as np
 
 from ..errors import UserError
 from ..profile import RigProfile
-from .dataset import (MAX_ABS_POSITION_M, MAX_ABS_TIME_S, MAX_JET_FORCE_N, QUATERNION_NORM_TOLERANCE, Dataset,
-                      SampleFlag, saturation_flags, steps_from_runs)
+from ..params import MAX_PLAUSIBLE_POSITION_M
+from .dataset import (MAX_ABS_TIME_S, MAX_JET_FORCE_N, QUATERNION_NORM_TOLERANCE, Dataset, SampleFlag,
+                      saturation_flags, steps_from_runs)
 
 REQUIRED_COLUMNS: tuple[str, ...] = (
     "t", "q1", "q2", "q3",
@@ -394,7 +395,7 @@ def _first_undecodable_byte(path: Path) -> int:
 # Magnitude and unit of each measured column (`Dataset`'s limits, checked here to name
 # the line).
 _PLAUSIBLE = {"t": (MAX_ABS_TIME_S, "s"), **{q: (MAX_JET_FORCE_N, "N") for q in ("q1", "q2", "q3")},
-              **{column: (MAX_ABS_POSITION_M, "m") for triplet in POSITION_COLUMNS.values() for column in triplet}}
+              **{column: (MAX_PLAUSIBLE_POSITION_M, "m") for triplet in POSITION_COLUMNS.values() for column in triplet}}
 
 
 def _parse_numbers(strings: tuple[str, ...], column: str, problem: _Problem, column_order: int,

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..geometry import quat_conjugate, quat_multiply, quat_rotate
-from ..params import ModelParameters
+from ..params import MAX_PLAUSIBLE_POSITION_M, ModelParameters
 from ..profile import RigProfile
 
 # Orientations are unit quaternions to within this (a tracker's or a filter's output,
@@ -35,9 +35,9 @@ QUATERNION_NORM_TOLERANCE = 1e-3
 
 # Plausible magnitudes. A finite value past them is an input error (a unit slip, a
 # corrupt cell), and the largest overflow the step averages and frame arithmetic to inf.
+# Positions use the profiles' limit, `params.MAX_PLAUSIBLE_POSITION_M`.
 MAX_ABS_TIME_S = 1e10  # a Unix time up to the year 2286; session times are far smaller
 MAX_JET_FORCE_N = 100.0  # the bench's water jets deliver well under 1 N
-MAX_ABS_POSITION_M = 10.0  # a tracker's field is a metre across; profiles bound the base at 10 m
 
 
 class SampleFlag(enum.IntFlag):
@@ -211,7 +211,7 @@ class Dataset:
             arrays[name] = q / np.where(np.abs(norm - 1.0) > 1e-12, norm, 1.0)[:, None]
         for name in ("base_position_m", "tip_position_m"):
             value = getattr(self, name)
-            arrays[name] = None if value is None else _float_array(name, value, (3,), rows, MAX_ABS_POSITION_M, "m")
+            arrays[name] = None if value is None else _float_array(name, value, (3,), rows, MAX_PLAUSIBLE_POSITION_M, "m")
         sweep = np.full(rows, -1, dtype=np.int64) if self.sweep is None else _int_array("sweep", self.sweep, rows)
         if np.any(sweep < -1):
             i = int(np.argmax(sweep < -1))

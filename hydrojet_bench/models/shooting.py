@@ -356,7 +356,7 @@ class ShootingModel:
         """
         seed = warm_start if warm_start is not None else previous
         cached = self._reusable_packing(params)
-        if cached is not None and not cached.problem.depends_on_previous_state and seeds_kernel(seed):
+        if cached is not None and self.shares_packing(cached) and seeds_kernel(seed):
             # The usual warm solve, other jets under the same parameters: one kernel call
             # on the last packing, which `prepare` would copy only to change the jets.
             jets = _checked_jets(jet_forces_n)

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from hydrojet_bench.data import (REQUIRED_COLUMNS, Dataset, SampleFlag, csv_io, read_csv, read_csv_steps,
                                  saturation_flags, write_csv)
-from hydrojet_bench.data.dataset import MAX_ABS_POSITION_M
+from hydrojet_bench.params import MAX_PLAUSIBLE_POSITION_M
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.inputs import load_dataset
 from hydrojet_bench.profile import load_profile, profile_from_mapping
@@ -195,7 +195,7 @@ def test_write_refuses_flags_the_contract_cannot_hold(tmp_path: Path) -> None:
 # --- round trip ------------------------------------------------------------------------
 
 finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, allow_infinity=False)
-position = st.floats(min_value=-MAX_ABS_POSITION_M, max_value=MAX_ABS_POSITION_M)
+position = st.floats(min_value=-MAX_PLAUSIBLE_POSITION_M, max_value=MAX_PLAUSIBLE_POSITION_M)
 unit_quaternion = st.tuples(*[st.floats(-1.0, 1.0)] * 4).filter(
     lambda q: np.linalg.norm(q) > 0.1).map(lambda q: np.asarray(q) / np.linalg.norm(q))
 
