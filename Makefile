@@ -17,8 +17,11 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/hydrojet-bench run --log sessions/demo.mcap --overwrite --report sessions/demo-report
 
+# Many tests wait on emulated devices and subprocesses rather than compute, so the suite
+# runs on one pytest worker per usable core (pytest-xdist); PYTEST_XDIST_AUTO_NUM_WORKERS
+# overrides the count, and `pytest` alone runs serially.
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto
 
 perf: $(STAMP)
 	$(BIN)/hydrojet-bench perf
