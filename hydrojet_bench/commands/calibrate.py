@@ -27,7 +27,7 @@ from ..params_io import calibration_parameter_file, effect_specs, write_paramete
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
 from .next_steps import command, input_words, print_next
-from .log_notice import warn_if_incomplete, warn_if_recorded_elsewhere
+from .log_notice import warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_unsettled
 
 
 # Past this the orientations no longer count (a millimetre weighs ten radians) and the
@@ -67,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
         plan = "sweeps" if fit_on == SWEEPS else "calibration"
         raise UserError(f"{args.input}: no {_ROW_NAMES[fit_on]} to fit on; record some with "
                         f"`hydrojet-bench run --plan {plan}`")
+    single_sample_steps = warn_if_unsettled(args.input, steps)
     used = _rows_used(steps, rows)
     try:
         result = calibrate_dataset(model, steps, profile.model_parameters(), choice.calibration_names,
@@ -98,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
         from ..api import CalibrateResult
 
         render.write_json(args.json, {**CalibrateResult(model, choice.effect_specs, steps.select(rows), result,
-                                                        content).as_dict(), "profile_mismatch": profile_mismatch})
+                                                        content).as_dict(), "profile_mismatch": profile_mismatch,
+                                    "single_sample_steps": single_sample_steps})
     compare = command("compare", *input_words(args), "--params", args.output, "--online")
     print_next(console, "see how it predicts the sweeps with", [compare])
     return 0

@@ -1,7 +1,8 @@
 """The notices the analysis commands give about their input, each one warning line on
 standard error and a field of their JSON documents: a session log that is cut or
-damaged (``log_damage``), and a CSV table read with the default profile although
-another one wrote it (``profile_mismatch``)."""
+damaged (``log_damage``), a CSV table read with the default profile although
+another one wrote it (``profile_mismatch``), and steps of a single sample, which are no
+settled equilibria (``single_sample_steps``)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from pathlib import Path
 from rich.console import Console
 
 from ..data.csv_io import recorded_profile, recorded_with
+from ..data.dataset import Dataset
 from ..logs.condition import log_condition
 from ..profile import RigProfile
 
@@ -44,3 +46,20 @@ def warn_if_recorded_elsewhere(path: Path, profile_given: str | None, profile: R
     _warn(f"{path} was recorded with rig profile {recorded} (its comments say so) and is read with "
           f"{profile.name!r}, the default for a CSV table: give --profile")
     return {"recorded": recorded, "used": profile.name}
+
+
+def warn_if_unsettled(path: Path, steps: Dataset) -> dict[str, int] | None:
+    """For steps (``steps``, reduced by `Dataset.quasistatic_steps`) of which some
+    average a single sample, as when the jets change at every row of a table: print how
+    many and return that for the JSON document; None when every step averages more.
+    The models are quasistatic, so such a step is taken for a settled equilibrium and a
+    rod still moving reads as model error."""
+    if steps.samples is None:
+        return None
+    single = int((steps.samples == 1).sum())
+    if not single:
+        return None
+    _warn(f"{path}: {single} of {len(steps)} steps average a single sample (the jets changed at the next "
+          "row), so they are no settled equilibria, and the quasistatic models take a rod still moving "
+          "for model error: label the settled rows (sweep and step columns) or hold each command longer")
+    return {"count": single, "steps": len(steps)}

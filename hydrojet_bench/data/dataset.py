@@ -169,6 +169,8 @@ class Dataset:
     sweep: (N,) int, -1 for calibration or unlabelled rows, else a sweep number >= 0.
     step: (N,) int, the quasistatic step; None derives it with `steps_from_runs`.
     flags: (N,) int, bitwise `SampleFlag`; None means all good.
+    samples: (N,) int >= 1, how many recorded samples each row averages (set by
+        `quasistatic_steps`); None for rows that are samples themselves.
     profile: the rig profile the data was recorded with.
     source: where the data came from (a file name, "twin seed 3", ...).
 
@@ -187,6 +189,7 @@ class Dataset:
     step: NDArray[np.int64] | None = None
     flags: NDArray[np.int64] | None = None
     source: str = ""
+    samples: NDArray[np.int64] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.profile, RigProfile):
@@ -227,6 +230,12 @@ class Dataset:
             raise ValueError(f"Dataset.flags row {i} has unknown bits: {flags[i]} (known: "
                              f"{', '.join(f'{f.name}={f.value}' for f in SampleFlag if f.value)})")
         arrays["flags"] = flags
+        if self.samples is not None:
+            samples = _int_array("samples", self.samples, rows)
+            if np.any(samples < 1):
+                i = int(np.argmax(samples < 1))
+                raise ValueError(f"Dataset.samples row {i} is {samples[i]}; a row averages at least one sample")
+            arrays["samples"] = samples
         for name, array in arrays.items():
             object.__setattr__(self, name, None if array is None else _frozen(array))
         object.__setattr__(self, "source", str(self.source))
@@ -261,7 +270,8 @@ class Dataset:
                        base_orientation=self.base_orientation[index],
                        tip_orientation=self.tip_orientation[index],
                        base_position_m=pick(self.base_position_m), tip_position_m=pick(self.tip_position_m),
-                       sweep=self.sweep[index], step=self.step[index], flags=self.flags[index])
+                       sweep=self.sweep[index], step=self.step[index], flags=self.flags[index],
+                       samples=pick(self.samples))
 
     @classmethod
     def concatenate(cls, parts: Sequence[Dataset]) -> Dataset:
@@ -277,7 +287,7 @@ class Dataset:
         return replace(parts[0], time_s=join("time_s"), jet_forces_n=join("jet_forces_n"),
                        base_orientation=join("base_orientation"), tip_orientation=join("tip_orientation"),
                        base_position_m=join("base_position_m"), tip_position_m=join("tip_position_m"),
-                       sweep=join("sweep"), step=join("step"), flags=join("flags"))
+                       sweep=join("sweep"), step=join("step"), flags=join("flags"), samples=join("samples"))
 
     def calibration_rows(self) -> Dataset:
         """Rows with sweep -1 (calibration or unlabelled)."""
@@ -374,7 +384,8 @@ class Dataset:
         arithmetic mean. The row's time is that of the last sample used. If every
         sample in a step's window is flagged, they are all used and the row keeps the
         union of their flags (so `valid_mask` leaves it out); otherwise the row keeps
-        the union of the flags of the samples used.
+        the union of the flags of the samples used. ``samples`` counts the recorded
+        samples each row averages (the rows' own counts summed, if they are averages).
         """
         if window_s is not None and not (np.isfinite(window_s) and window_s >= 0):
             raise ValueError(f"window_s must be >= 0 s or None, got {window_s!r}")
@@ -391,6 +402,8 @@ class Dataset:
         index = np.concatenate(used)
         group = np.repeat(np.arange(groups), [len(u) for u in used])
         counts = np.array([len(u) for u in used], dtype=float)
+        samples = (counts.astype(np.int64) if self.samples is None
+                   else np.bincount(group, weights=self.samples[index], minlength=groups).astype(np.int64))
         last = np.array([u[-1] for u in used])
 
         def mean(array: np.ndarray | None) -> np.ndarray | None:
@@ -416,4 +429,5 @@ class Dataset:
             flags=flags,
             profile=self.profile,
             source=f"{self.source} (quasistatic: {window} of each step)",
+            samples=samples,
         )

@@ -86,3 +86,26 @@ def test_a_table_recorded_with_another_profile_is_read_with_the_default_and_a_wa
         assert mismatch == ({"recorded": recorded, "used": "sim"} if warned else None)
     assert main(["calibrate", str(elsewhere), "--profile", "sim", "-o", str(tmp_path / "chosen.toml")]) == 0
     assert "recorded with rig profile" not in capsys.readouterr().err
+
+
+def test_steps_of_a_single_sample_are_warned_in_the_output_and_the_json(hysteretic, tmp_path, capsys):
+    """A table keeping one row per step (a trajectory logged while the jets move, say) is
+    still fitted, but every command that takes its steps for equilibria says how many
+    are one sample; the twin's settled table says nothing."""
+    from hydrojet_bench.data.csv_io import read_csv
+
+    rows = read_csv(hysteretic, load_profile("sim"))
+    single = tmp_path / "single.csv"
+    write_csv(rows.select([stop - 1 for _, stop in rows.step_runs()]), single)
+    steps = len(list(rows.step_runs()))
+    warning = (f"warning: {single}: {steps} of {steps} steps average a single sample (the jets changed at the "
+               "next row)")
+    for table, warned in ((hysteretic, False), (single, True)):
+        params, document = tmp_path / f"{table.stem}.toml", tmp_path / f"{table.stem}.json"
+        assert main(["calibrate", str(table), "-o", str(params), "--json", str(document)]) == 0
+        assert (warning in " ".join(capsys.readouterr().err.split())) == warned
+        expected = {"count": steps, "steps": steps} if warned else None
+        assert json.loads(document.read_text())["single_sample_steps"] == expected
+        assert main(["compare", str(table), "--params", str(params), "--json", str(document)]) == 0
+        assert (warning in " ".join(capsys.readouterr().err.split())) == warned
+        assert json.loads(document.read_text())["single_sample_steps"] == expected

@@ -287,7 +287,7 @@ def test_steps_read_block_by_block_are_the_steps_of_the_whole_file(original: Dat
             csv_io._BLOCK_ROWS = default
     assert streamed.source == whole.source
     for name in ("time_s", "jet_forces_n", "base_orientation", "tip_orientation", "base_position_m",
-                 "tip_position_m", "sweep", "step", "flags"):
+                 "tip_position_m", "sweep", "step", "flags", "samples"):
         expected, actual = getattr(whole, name), getattr(streamed, name)
         if expected is None:
             assert actual is None and getattr(blocks, name) is None, name

@@ -192,6 +192,29 @@ def test_quasistatic_steps_average_noisy_samples_to_the_truth() -> None:
     assert rotation_angle_deg(whole.tip_orientation[0], truths[0][1]) > 1.0
 
 
+def test_each_step_counts_the_samples_it_averages_through_selection_and_reduction() -> None:
+    rng = np.random.default_rng(7)
+    data, _ = noisy_steps(rng)
+    assert data.samples is None
+    steps = data.quasistatic_steps(window_s=1.0)
+    in_window = [int(np.sum(data.time_s[start:stop] >= data.time_s[stop - 1] - 1.0))
+                 for start, stop in data.step_runs()]
+    assert steps.samples.tolist() == in_window and set(in_window) <= {50, 51}  # 50 Hz, 1 s
+    assert data.quasistatic_steps(window_s=None).samples.tolist() == [250] * 5
+    # Rows that are averages already add up their counts; selection and joins keep them.
+    assert steps.quasistatic_steps(window_s=None).samples.tolist() == in_window
+    merged = Dataset.concatenate([steps.select([0, 1]), steps.select([2, 3, 4])])
+    assert merged.samples.tolist() == in_window
+    assert merged.quasistatic_steps(window_s=None).samples.tolist() == in_window
+    # Averages joined with raw samples (a count each, or none): no count at all.
+    assert Dataset.concatenate([steps.select([0, 1]), data.select(data.time_s >= 10.0)]).samples is None
+    # Jets that change at every row: each step is one sample.
+    moving = simple(6, jet_forces_n=np.outer(np.arange(6), [0.01, 0.0, 0.0]))
+    assert moving.quasistatic_steps().samples.tolist() == [1] * 6
+    with pytest.raises(ValueError, match="samples row 2 is 0"):
+        simple(3, samples=[1, 4, 0])
+
+
 def test_quasistatic_steps_skip_flagged_samples_and_flag_unusable_steps() -> None:
     rng = np.random.default_rng(5)
     data, truths = noisy_steps(rng)
