@@ -24,10 +24,12 @@ HOLD_S = 3.0
 
 @pytest.fixture(scope="module")
 def session_log(tmp_path_factory):
-    """Six 3 s static poses, then one short sweep per jet in 1 s steps, at 10x."""
+    """Six 3 s static poses, then one short sweep per jet in 1 s steps, at 4x: at 10x a
+    test machine loaded by the other test workers lost IMU samples and tracker frames
+    enough to miss a hold (2 runs of 4 with three busy processes on two cores)."""
     log_path = tmp_path_factory.mktemp("sensors") / "session.mcap"
     profile = load_profile("sim")
-    settings = replace(profile.config, session=replace(profile.config.session, time_scale=10.0, window_s=0.5),
+    settings = replace(profile.config, session=replace(profile.config.session, time_scale=4.0, window_s=0.5),
                        # Sensors are under test, not the watchdog: a loaded test machine can
                        # stall the loop for seconds, far beyond the firmware's 0.5 s.
                        valves=replace(profile.config.valves, watchdog_ms=60_000.0, reply_timeout_ms=5_000.0))
