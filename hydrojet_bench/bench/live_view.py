@@ -69,7 +69,8 @@ class LiveView:
             f"{'[yellow]' if rate.below_warning else ''}{name} {rate.delivered_hz:.1f}/{rate.configured_hz:g} Hz"
             f"{'[/]' if rate.below_warning else ''}" for name, rate in status.stream_rates.items()) or "-")
         table.add_row("valves", f"{status.valve_commands} commands, {status.valve_retries} timeouts")
-        table.add_row("session time", f"{status.session_time_s:.0f} s (x{self.time_scale:g})")
+        kept = "" if status.time_scale_kept is None else f"x{status.time_scale_kept:.1f} kept of "
+        table.add_row("session time", f"{status.session_time_s:.0f} s ({kept}x{self.time_scale:g})")
         events = Table.grid()
         for t_s, level, message in status.events:
             events.add_row(f"[{_LEVEL_STYLE.get(level, '')}]{t_s:7.1f} s  {escape(message)}[/]")

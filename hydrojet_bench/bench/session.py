@@ -61,7 +61,7 @@ from ..plans import CALIBRATION_SWEEP, Plan, PlanStep
 from ..config import RigConfig
 from ..profile import RigProfile
 from .checks import CheckResult, CheckSettings, predicted_bending_rad, run_setup_checks
-from .clock import Clock, ScaledClock
+from .clock import Clock, PacedClock, ScaledClock
 from .recorder import StepRecorder
 from .rig import ImuPair, open_rig
 from .simulated_rig import SimulatedDevices
@@ -145,6 +145,7 @@ class SessionStatus:
     step: PlanStep | None = None
     session_time_s: float = 0.0
     remaining_session_s: float = 0.0
+    time_scale_kept: float | None = None  # session seconds per wall second since arming
     ref_error_deg: float | None = None
     online_error_deg: float | None = None
     errors_step_index: int = -1  # the step the two errors are of (estimates trail the plan)
@@ -180,6 +181,17 @@ class SessionResult:
     # a simulated rig's session clock runs on with nothing commanded.
     armed_session_s: float | None = None
     armed_wall_s: float | None = None
+    # Wall seconds a simulated rig's session time waited for a host too slow for its
+    # time scale (`PacedClock`); 0 on the rig.
+    held_wall_s: float = 0.0
+
+    @property
+    def time_scale_kept(self) -> float | None:
+        """Session seconds per wall second from the arming of the valves to the end
+        (None if they were never armed)."""
+        if self.armed_session_s is None or self.armed_wall_s is None or self.wall_time_s <= self.armed_wall_s:
+            return None
+        return (self.session_time_s - self.armed_session_s) / (self.wall_time_s - self.armed_wall_s)
 
     def __repr__(self) -> str:
         # Short: Python 3.11's asyncio.run formats its main task, result included, on
@@ -195,7 +207,10 @@ class Session:
                  on_log_message: Callable[[str, int, bytes], None] | None = None) -> None:
         self.request = request
         self.on_log_message = on_log_message  # every log message as written: see LogWriter's listener
-        self.clock = clock or ScaledClock(request.settings.session.time_scale)
+        # A rig of emulators only waits for a host that falls behind rather than losing
+        # samples; a real device's time is the wall's.
+        self.clock = clock or (PacedClock if request.settings.transports.all_simulated
+                               else ScaledClock)(request.settings.session.time_scale)
         self.status = SessionStatus(len(request.plan))
         self.on_update = on_update or (lambda status: None)
         profile = request.profile
@@ -270,7 +285,8 @@ class Session:
                              time.monotonic() - started, self.params, self.calibration,
                              tuple(self.estimates), steps, self._overall_rates, self.checks,
                              self.calibration_warnings, None if armed is None else armed[0],
-                             None if armed is None else armed[1] - started)
+                             None if armed is None else armed[1] - started,
+                             self.clock.held_wall_s if isinstance(self.clock, PacedClock) else 0.0)
 
     def event(self, level: str, source: str, message: str) -> None:
         t_s = self.clock.now()
@@ -298,6 +314,8 @@ class Session:
             async with asyncio.TaskGroup() as group:
                 streams = [group.create_task(self._em_stream(rig.tracker), name="em-stream"),
                            group.create_task(self._estimate_steps(), name="estimation")]
+                if isinstance(self.clock, PacedClock):
+                    streams.append(group.create_task(self.clock.keep_pace(), name="session-clock"))
                 imu_stream = None
                 if rig.imus is not None:
                     imu_stream = group.create_task(self._imu_stream(rig.imus), name="imu-stream")
@@ -544,6 +562,18 @@ class Session:
             if figure.below_warning:
                 self.event("warning", figure.stream, f"below its configured rate: {figure.describe()}")
         self._overall_rates = figures
+        if isinstance(self.clock, PacedClock) and self.clock.held_wall_s > 0.0:
+            self.event("info", "session", f"x{self._time_scale_kept():.1f} kept of x{self.clock.time_scale:g}: "
+                       f"session time waited {self.clock.held_wall_s:.1f} s of wall time for the host, "
+                       "so the emulated devices lost no samples to it")
+
+    def _time_scale_kept(self) -> float | None:
+        """Session seconds per wall second since the valves were armed."""
+        if self._armed is None:
+            return None
+        armed_session_s, armed_wall_s = self._armed
+        wall_s = time.monotonic() - armed_wall_s
+        return (self.clock.now() - armed_session_s) / wall_s if wall_s > 0.0 else None
 
     # --- the plan -------------------------------------------------------------------
 
@@ -567,6 +597,7 @@ class Session:
             remaining -= step.settle_s
             status.remaining_session_s = remaining
             status.session_time_s = self.clock.now()
+            status.time_scale_kept = self._time_scale_kept()
             await self._settle(index, step, self.clock.now(), min(timing.window_s, step.settle_s))
             await _after_due_timers()
             if index + 1 == len(request.plan):

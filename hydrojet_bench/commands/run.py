@@ -223,8 +223,10 @@ def _timing(result) -> str:
     time_scale times that of session time in which nothing was commanded)."""
     if result.armed_session_s is None:
         return f"{result.session_time_s:.0f} s session time in {result.wall_time_s:.1f} s wall time"
+    waited = (f" (x{result.time_scale_kept:.1f}: session time waited {result.held_wall_s:.1f} s for the host)"
+              if result.held_wall_s > 0.0 and result.time_scale_kept is not None else "")
     return (f"{result.session_time_s - result.armed_session_s:.0f} s session time in "
-            f"{result.wall_time_s - result.armed_wall_s:.1f} s wall time, after {result.armed_wall_s:.1f} s of "
+            f"{result.wall_time_s - result.armed_wall_s:.1f} s wall time{waited}, after {result.armed_wall_s:.1f} s of "
             "set-up (devices, kernels)")
 
 

@@ -257,6 +257,11 @@ class TransportsTable(Table, kw_only=True):
         """True when any device is emulated (the session then builds a digital twin)."""
         return SIM in (self.valves, self.tracker, self.imu_bus) or PTY in (self.valves, self.tracker)
 
+    @property
+    def all_simulated(self) -> bool:
+        """True when every device is emulated on the session clock, none is real."""
+        return self.valves in (SIM, PTY) and self.tracker in (SIM, PTY) and self.imu_bus == SIM
+
 
 class TrackerTable(Table, kw_only=True):
     tools: tuple[str, ...] = ("base", "tip")  # names of the tracker's sensors in port order

@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import gc
+import time
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ from msgspec.structs import replace
 from hydrojet_bench.bench.replay import live_difference_deg, read_session, replay
 from drivers.imu import output_rate_hz
 from drivers.transport.sim import unregister_device
+from hydrojet_bench.bench.clock import ScaledClock
 from hydrojet_bench.bench.session import Session, SessionAborted, SessionRequest
 from hydrojet_bench.model_choice import build_model
 from hydrojet_bench.estimation import OnlineSettings
@@ -223,6 +225,46 @@ def test_a_stream_below_its_configured_rate_is_measured_logged_and_warned(tmp_pa
                 if m.topic == "/events" and m.level == "warning" and m.source == "em"]
     assert any(w.startswith("falling behind: em stream delivered") for w in warnings), warnings
     assert any(w.startswith("below its configured rate: em stream") for w in warnings), warnings
+
+
+@pytest.mark.parametrize("paced", [True, False])
+def test_a_simulated_rig_waits_for_a_host_that_falls_behind_and_says_so(tmp_path, paced):
+    """A loop held 12 ms of every 20 (two and a half tracker frames at x5): the simulated
+    rig's paced clock stands still while the host is behind, so the streams keep their
+    rates, and the session reports the time scale it kept; a plain scaled clock runs on
+    and the tracker's frames pass unread."""
+    log_path = tmp_path / "behind.mcap"
+    request = make_request(log_path, plan=validation_sweeps(steps_up=1, repetitions=1, settle_s=SETTLE_S),
+                           calibrate=False, setup_checks=False)
+
+    async def main():
+        async def hog():
+            while True:
+                time.sleep(0.012)
+                await asyncio.sleep(0.008)
+
+        hogging = asyncio.create_task(hog())
+        try:
+            result = await Session(request, clock=None if paced else ScaledClock(TIME_SCALE)).run()
+        finally:
+            hogging.cancel()
+            await asyncio.gather(hogging, return_exceptions=True)
+        await asyncio.sleep(0)
+        assert asyncio.all_tasks() == {asyncio.current_task()}  # the pacing task stopped with the session
+        return result
+
+    result = asyncio.run(main())
+    rates = {rate.stream: rate for rate in result.stream_rates}
+    events = [m.message for m in read_log(log_path).messages if m.topic == "/events" and m.source == "session"]
+    said = [message for message in events if "session time waited" in message]
+    if paced:
+        assert rates["em"].fraction > 0.95 and rates["imu"].fraction > 0.95, rates
+        assert result.held_wall_s > 0.0 and result.time_scale_kept < 0.9 * TIME_SCALE
+        assert len(said) == 1 and said[0].startswith(f"x{result.time_scale_kept:.1f} kept of x{TIME_SCALE:g}")
+    else:
+        assert rates["em"].fraction < 0.8, rates
+        assert result.held_wall_s == 0.0 and result.time_scale_kept == pytest.approx(TIME_SCALE, rel=0.02)
+        assert not said
 
 
 def test_each_tracker_frame_is_logged_once_and_counted_once(finished_session):

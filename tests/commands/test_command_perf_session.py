@@ -1,7 +1,10 @@
 """`perf`'s session_protocol section: a plan played on the simulated rig at the physical
-rig's rates, reported as wall time and delivered / configured rate per stream."""
+rig's rates, reported as wall time, delivered / configured rate per stream and the time
+scale the simulated rig kept."""
 
 from __future__ import annotations
+
+import pytest
 
 from hydrojet_bench.commands.perf_session import RIG_PROFILE, session_protocol_figures
 from hydrojet_bench.plans import validation_sweeps
@@ -21,9 +24,16 @@ def test_session_protocol_reports_wall_time_and_rate_fractions_at_the_rigs_rates
     assert figures["wall_s"] >= plan.duration_s / figures["time_scale"]
     for stream in ("imu", "tracker"):
         assert 0 < figures[f"{stream}_rate_fraction"] <= 1.05, figures
+    # The simulated rig's session time waits for a slow host: what it kept is said, and
+    # session seconds are the kept scale times the wall seconds after set-up.
+    armed_wall_s = figures["wall_s"] - figures["setup_wall_s"]
+    assert figures["held_wall_s"] >= 0.0
+    assert figures["time_scale_kept"] == pytest.approx(
+        figures["time_scale"] * (1.0 - figures["held_wall_s"] / armed_wall_s), rel=0.05), figures
     # Each figure is named as missed exactly when it misses its target.
     below = {"wall_s": figures["wall_s"] > figures["target_wall_s"],
              "imu_rate_fraction": figures["imu_rate_fraction"] < figures["target_rate_fraction"],
-             "tracker_rate_fraction": figures["tracker_rate_fraction"] < figures["target_rate_fraction"]}
+             "tracker_rate_fraction": figures["tracker_rate_fraction"] < figures["target_rate_fraction"],
+             "time_scale_kept": figures["time_scale_kept"] < figures["target_rate_fraction"] * figures["time_scale"]}
     assert figures["missed"] == [figure for figure, missed in below.items() if missed], figures
     assert figures["met"] is (not figures["missed"])
