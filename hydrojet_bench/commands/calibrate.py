@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     choice = model_choice(args)  # validates --effect before the data is read
     model = choice.model
     profile, steps = load_steps(args.input, args.profile)
-    warn_if_incomplete(args.input)
+    log_damage = warn_if_incomplete(args.input)
     profile_mismatch = warn_if_recorded_elsewhere(args.input, args.profile, profile)
     fit_on = args.fit_on or rows_that_identify(choice.requested)
     rows = fit_mask(steps, fit_on)
@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
         plan = "sweeps" if fit_on == SWEEPS else "calibration"
         raise UserError(f"{args.input}: no {_ROW_NAMES[fit_on]} to fit on; record some with "
                         f"`hydrojet-bench run --plan {plan}`")
-    single_sample_steps = warn_if_unsettled(args.input, steps)
+    single_sample_steps = warn_if_unsettled(args.input, steps, log_damage)
     used = _rows_used(steps, rows)
     try:
         result = calibrate_dataset(model, steps, profile.model_parameters(), choice.calibration_names,

@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     profile, steps, validation = comparison_steps(args.input, args.profile)
     log_damage = warn_if_incomplete(args.input)
     profile_mismatch = warn_if_recorded_elsewhere(args.input, args.profile, profile)
-    single_sample_steps = warn_if_unsettled(args.input, steps)
+    single_sample_steps = warn_if_unsettled(args.input, steps, log_damage)
 
     def evaluate(choice: ModelChoice) -> Evaluation:
         params = choice.parameters(profile.model_parameters())

@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"--export-profile needs the profile as a file; {profile.source} has none")
     log_damage = warn_if_incomplete(args.input)
     profile_mismatch = warn_if_recorded_elsewhere(args.input, args.profile, profile)
-    single_sample_steps = warn_if_unsettled(args.input, steps)
+    single_sample_steps = warn_if_unsettled(args.input, steps, log_damage)
     console = render.console_for(args)
     diagnosis = _diagnose(args, profile, steps, choice, candidates, Console(stderr=True))
     print_diagnosis(console, diagnosis, args)

@@ -48,13 +48,15 @@ def warn_if_recorded_elsewhere(path: Path, profile_given: str | None, profile: R
     return {"recorded": recorded, "used": profile.name}
 
 
-def warn_if_unsettled(path: Path, steps: Dataset) -> dict[str, int] | None:
+def warn_if_unsettled(path: Path, steps: Dataset, log_damage: dict[str, object] | None) -> dict[str, int] | None:
     """For steps (``steps``, reduced by `Dataset.quasistatic_steps`) of which some
     average a single sample, as when the jets change at every row of a table: print how
-    many and return that for the JSON document; None when every step averages more.
-    The models are quasistatic, so such a step is taken for a settled equilibrium and a
-    rod still moving reads as model error."""
-    if steps.samples is None:
+    many and return that for the JSON document; None when every step averages more, or
+    for a damaged log (``log_damage`` from `warn_if_incomplete`), whose notice already
+    says what was cut away, which may leave a step one sample. The models are
+    quasistatic, so such a step is taken for a settled equilibrium and a rod still
+    moving reads as model error."""
+    if steps.samples is None or log_damage is not None:
         return None
     single = int((steps.samples == 1).sum())
     if not single:
