@@ -188,14 +188,9 @@ class SessionResult:
     # Wall seconds a simulated rig's session time waited for a host too slow for its
     # time scale (`PacedClock`); 0 on the rig.
     held_wall_s: float = 0.0
-
-    @property
-    def time_scale_kept(self) -> float | None:
-        """Session seconds per wall second from the arming of the valves to the end
-        (None if they were never armed)."""
-        if self.armed_session_s is None or self.armed_wall_s is None or self.wall_time_s <= self.armed_wall_s:
-            return None
-        return (self.session_time_s - self.armed_session_s) / (self.wall_time_s - self.armed_wall_s)
+    # Session seconds per wall second from the arming of the valves to the end (None if
+    # they were never armed).
+    time_scale_kept: float | None = None
 
     def __repr__(self) -> str:
         # Short: Python 3.11's asyncio.run formats its main task, result included, on
@@ -285,12 +280,13 @@ class Session:
                 raise
         steps = Dataset.concatenate(self.settled_rows) if self.settled_rows else None
         armed = self._armed
+        kept = self._time_scale_kept()
         return SessionResult(request.log_path, completed, len(request.plan), self.clock.now(),
                              time.monotonic() - started, self.params, self.calibration,
                              tuple(self.estimates), steps, self._overall_rates, self.checks,
                              self.calibration_warnings, None if armed is None else armed[0],
                              None if armed is None else armed[1] - started,
-                             self.clock.held_wall_s if isinstance(self.clock, PacedClock) else 0.0)
+                             self.clock.held_wall_s if isinstance(self.clock, PacedClock) else 0.0, kept)
 
     def event(self, level: str, source: str, message: str) -> None:
         t_s = self.clock.now()
