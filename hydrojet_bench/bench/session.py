@@ -69,13 +69,9 @@ from .stream_rates import StreamRateFigure, StreamRateMeter
 
 # Consecutive stream failures after which a device counts as lost and the session stops.
 MAX_CONSECUTIVE_FAILURES = 20
-# The IMU FIFOs are drained every this many output periods: under half of their 22
-# records, so a turn of the event loop can come 12 samples (0.12 s at 100 Hz) late
-# before one is lost. Each drain costs three bus transfers per chip whatever it holds:
-# every 5 samples, the paper protocol on the simulated rig kept x17.2-17.5 of x25 in
-# 75.5 s of wall time; every 10, x17.4-18.1 in 66-69 s (the calibration's thread got
-# more of the interpreter, so the plan waited less session time for it).
-FIFO_DRAIN_SAMPLES = 10
+# The IMU FIFOs are drained every this many output periods: a quarter of their 22
+# records, so a turn of the event loop can come ~17 samples late before one is lost.
+FIFO_DRAIN_SAMPLES = 5
 # Wall time a log record may arrive after the time it is stamped with (a sample written
 # after fusion, a prediction after its solve) and still be logged in time order.
 REORDER_WINDOW_WALL_S = 0.25
