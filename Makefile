@@ -1,5 +1,7 @@
 # Both targets build .venv from nothing on a machine with only Python >= 3.11,
-# and refresh it whenever pyproject.toml changes.
+# and refresh it whenever pyproject.toml changes. The set-up ends by compiling every
+# numba kernel once (`hydrojet-bench warmup`), so no later command, test worker or
+# diagnosis worker process waits on a compile.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -12,6 +14,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/hydrojet-bench warmup
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -24,7 +24,7 @@ from .errors import ConvergenceError, UserError
 
 # Order is the order shown in --help.
 COMMAND_MODULES = ("run", "replay", "sensors", "simulate", "calibrate", "compare", "diagnose", "study", "batch",
-                   "perf", "emulate", "recover")
+                   "perf", "warmup", "emulate", "recover")
 
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
