@@ -53,13 +53,14 @@ def _sensitivities_and_online_updates(model_name: str) -> None:
     sensitivities and the online estimator's update, on the plain rod and on the general
     one (the diagnosis estimates online on its baseline only, a plain rod)."""
     from ..estimation import OnlineDisturbanceEstimator, OnlineSettings
-    from ..model_choice import build_model
+    from ..effects import load_effect
+    from ..models import make_model
     from ..params import DISTURBANCE_NAMES, ModelParameters, with_parameters
     from ..sensitivity import sensitivity
 
     jet_forces_n = np.array([0.05, 0.0, 0.02])
     for effects, values in (((), {}), (("nonlinear_elasticity",), {"nonlinear_elasticity.beta_m2": 1e-4})):
-        model, _ = build_model(model_name, effects)
+        model = make_model(model_name, tuple(load_effect(name) for name in ("gravity", *effects)))
         params = with_parameters(ModelParameters(), values)
         nominal = model.solve(jet_forces_n, params)
         sensitivity(model, jet_forces_n, params, (*DISTURBANCE_NAMES, "E0"), nominal=nominal)

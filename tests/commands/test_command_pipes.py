@@ -104,7 +104,7 @@ def test_a_reader_that_stops_early_is_exit_code_141_without_a_traceback(folder, 
 def test_every_help_states_the_exit_codes():
     main = build_parser()
     every = [main, *_all_subparsers(main)]
-    assert len(every) == 1 + 12 + 2  # the commands, and batch's two actions
+    assert len(every) == 1 + 13 + 2  # the commands, and batch's two actions
     for parser in every:
         text = " ".join(parser.format_help().split())
         assert "exit codes: 0 done; 1 internal error" in text and "; 2 a mistake in the command line" in text, \

@@ -8,9 +8,9 @@ import sys
 _CHECK = """
 import importlib, inspect
 from numba.core.registry import CPUDispatcher
-from hydrojet_bench.commands.warmup import compile_kernels
+from hydrojet_bench.cli import main
 
-compile_kernels()
+assert main(["warmup"]) == 0
 called = []
 for module_name in {modules!r}:
     module = importlib.import_module(module_name)
@@ -33,10 +33,13 @@ KERNEL_MODULES = ("hydrojet_bench.models.kernels", "hydrojet_bench.estimation.on
                   "hydrojet_bench.twin.settling", "drivers.imu.emulator", "drivers.aurora.crc")
 
 
-def test_warmup_compiles_every_kernel_and_both_variants_of_the_rods():
+def test_warmup_says_what_it_does_and_compiles_every_kernel_and_both_variants_of_the_rods():
     done = subprocess.run([sys.executable, "-c", _CHECK.format(modules=KERNEL_MODULES)], capture_output=True,
                           text=True, timeout=900)
     assert done.returncode == 0, done.stderr
+    assert done.stderr.startswith("compiling the kernels")
+    assert "the prb model with every library effect" in done.stderr
+    assert "kernels ready in" in done.stderr.splitlines()[-1]
     *complaints, called = done.stdout.splitlines()
     assert complaints == []
     # The entry points of the solves, the sensitivities, the online update, the twin's
@@ -44,11 +47,3 @@ def test_warmup_compiles_every_kernel_and_both_variants_of_the_rods():
     assert {"solve_from", "solve_batch", "tip_wrench_sensitivity", "tip_wrench_sensitivity_batch", "body_twist",
             "_update_kernel", "settling_states_into", "_fifo_run", "_crc16_of_bytes"} <= set(called.split())
 
-
-def test_warmup_command_says_what_it_does():
-    done = subprocess.run([sys.executable, "-m", "hydrojet_bench.cli", "warmup"], capture_output=True, text=True,
-                          timeout=900)
-    assert done.returncode == 0, done.stderr
-    assert done.stderr.startswith("compiling the kernels")
-    assert "the prb model with every library effect" in done.stderr
-    assert "kernels ready in" in done.stderr.splitlines()[-1]
