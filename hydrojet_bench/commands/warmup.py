@@ -52,8 +52,8 @@ def _sensitivities_and_online_updates(model_name: str) -> None:
     """What a session and `compare` call that a diagnosis does not: the disturbance
     sensitivities and the online estimator's update, on the plain rod and on the general
     one (the diagnosis estimates online on its baseline only, a plain rod)."""
-    from ..estimation import OnlineDisturbanceEstimator, OnlineSettings
     from ..effects import load_effect
+    from ..estimation import OnlineDisturbanceEstimator, OnlineSettings
     from ..models import make_model
     from ..params import DISTURBANCE_NAMES, ModelParameters, with_parameters
     from ..sensitivity import sensitivity
