@@ -115,6 +115,8 @@ class AuroraTracker:
         self._opened = False
         self._tracking = False
         self._lock = asyncio.Lock()
+        # The polling command, made once, and again if use_tx or reply_option change.
+        self._frame_command: tuple[tuple[bool, int] | None, Command | None] = (None, None)
         self.version_text = ""
         self.handles: dict[str, int] = {}  # tool name -> port handle
         self.stats = {"retries": 0, "resets": 0}
@@ -265,8 +267,12 @@ class AuroraTracker:
         """Poll one frame now (BX or TX) and name its tools."""
         if not self._tracking:
             raise AuroraError(f"{self.url}: not tracking (open the tracker first)")
-        name = "TX" if self.use_tx else "BX"
-        reply = await self._exchange(Command(name, f"{self.reply_option:04X}"), binary=not self.use_tx)
+        key = (self.use_tx, self.reply_option)
+        if self._frame_command[0] != key:
+            self._frame_command = (key, Command("TX" if self.use_tx else "BX", f"{self.reply_option:04X}"))
+        command = self._frame_command[1]
+        name = command.name
+        reply = await self._exchange(command, binary=not self.use_tx)
         host_time = self.clock()
         if isinstance(reply, TrackingFrame):
             frame = reply
@@ -326,7 +332,7 @@ class AuroraTracker:
                     # Until a whole reply is in, the line is in an unknown state (this
                     # also covers a cancellation mid-exchange).
                     self._dirty = True
-                    await self._transport.write(command.encode())
+                    await self._transport.write(command.wire)
                     raw = await self._read_reply(binary, self.command_timeout_s)
                     self._dirty = False
                     reply: TextReply | TrackingFrame = (

@@ -10,6 +10,7 @@ The host always sends the first form; the emulator accepts both.
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass
 
@@ -27,7 +28,8 @@ _HEX4 = re.compile(r"[0-9A-Fa-f]{4}\Z")
 
 
 def _is_printable(text: str) -> bool:
-    return all(" " <= ch <= "~" for ch in text)
+    """Only ' ' to '~' (ASCII's printable characters)."""
+    return text.isascii() and text.isprintable()
 
 
 @dataclass(frozen=True)
@@ -48,6 +50,12 @@ class Command:
     def text(self) -> str:
         """``NAME:params``, the part the CRC covers."""
         return f"{self.name}:{self.params}"
+
+    @functools.cached_property
+    def wire(self) -> bytes:
+        """``encode()``, made once: a tracker is polled with one same command 40 times a
+        second (1000 times a wall second on a 25x simulated rig)."""
+        return self.encode()
 
     def encode(self, with_crc: bool = True) -> bytes:
         """Wire bytes: ``NAME:params<CRC><CR>``, or ``NAME params<CR>`` without CRC."""

@@ -81,6 +81,9 @@ COMM_BAUD = {"0": 9600, "1": 14400, "2": 19200, "3": 38400, "4": 57600, "5": 115
              "6": 921600, "7": 1228739, "A": 230400}
 
 _SUPPORTED_OPTIONS = int(ReplyOption.TRANSFORMS | ReplyOption.OUT_OF_VOLUME)
+_TRANSFORMS, _OUT_OF_VOLUME_OPTION = int(ReplyOption.TRANSFORMS), int(ReplyOption.OUT_OF_VOLUME)
+_OCCUPIED, _INITIALISED, _ENABLED = int(PortStatus.OCCUPIED), int(PortStatus.INITIALISED), int(PortStatus.ENABLED)
+_OUT_OF_VOLUME_BIT = int(PortStatus.OUT_OF_VOLUME)
 _KNOWN_COMMANDS = ("INIT", "COMM", "VER", "GETINFO", "RESET", "BEEP", "PHSR", "PHF",
                    "PINIT", "PENA", "PDIS", "TSTART", "TSTOP", "BX", "TX")
 
@@ -105,12 +108,8 @@ class _Port:
 
     @property
     def status_bits(self) -> int:
-        bits = PortStatus.OCCUPIED
-        if self.initialised:
-            bits |= PortStatus.INITIALISED
-        if self.enabled:
-            bits |= PortStatus.ENABLED
-        return int(bits)
+        # Plain ints: IntFlag operations cost microseconds each, at 1000 frames a wall second.
+        return (_OCCUPIED | (_INITIALISED if self.initialised else 0) | (_ENABLED if self.enabled else 0))
 
 
 def _parse_handle(params: str) -> int:
@@ -412,9 +411,9 @@ class AuroraEmulator(EmulatorHandler):
             option = parse_reply_option(params)
         except AuroraProtocolError:
             raise _DeviceError(ErrorCode.PARAMETER_COUNT) from None
-        if option & ~_SUPPORTED_OPTIONS or not option & ReplyOption.TRANSFORMS:
+        if option & ~_SUPPORTED_OPTIONS or not option & _TRANSFORMS:
             raise _DeviceError(ErrorCode.PARAMETER_RANGE)
-        return self.frame(bool(option & ReplyOption.OUT_OF_VOLUME))
+        return self.frame(bool(option & _OUT_OF_VOLUME_OPTION))
 
     def _cmd_bx(self, params: str) -> bytes:
         return encode_bx(self._tracking_frame(params))
@@ -440,7 +439,7 @@ class AuroraEmulator(EmulatorHandler):
                     continue
                 status_bits = port.status_bits
                 if port.out_of_volume:
-                    status_bits |= PortStatus.OUT_OF_VOLUME
+                    status_bits |= _OUT_OF_VOLUME_BIT
                 visible = (self._field_generator_connected and not port.missing
                            and (report_out_of_volume or not port.out_of_volume))
                 if visible:

@@ -176,6 +176,10 @@ def decode_bx(data: bytes) -> TrackingFrame:
         raise AuroraProtocolError("BX body truncated") from None
 
 
+# A dict lookup: calling the enum costs several times more, at 1000 frames a wall second.
+_HANDLE_STATUS = {int(status): status for status in HandleStatus}
+
+
 def _decode_bx_body(body: bytes) -> TrackingFrame:
     if not body:
         raise AuroraProtocolError("BX body is empty")
@@ -185,10 +189,9 @@ def _decode_bx_body(body: bytes) -> TrackingFrame:
     for _ in range(count):
         handle, status_byte = struct.unpack_from("<BB", body, pos)
         pos += 2
-        try:
-            status = HandleStatus(status_byte)
-        except ValueError:
-            raise AuroraProtocolError(f"handle {handle:02X}: unknown status {status_byte:#x}") from None
+        status = _HANDLE_STATUS.get(status_byte)
+        if status is None:
+            raise AuroraProtocolError(f"handle {handle:02X}: unknown status {status_byte:#x}")
         transform = None
         port_status = frame_number = None
         if status is HandleStatus.VALID:

@@ -14,6 +14,10 @@ from drivers.aurora.frames import HandleStatus, SystemStatus, ToolRecord
 from drivers.aurora.replies import PortStatus
 
 
+# A plain int: an IntFlag operation costs microseconds, and every frame tests each tool.
+_OUT_OF_VOLUME = int(PortStatus.OUT_OF_VOLUME)
+
+
 class ToolStatus(str, Enum):
     """Tracking state of one sensor in one frame."""
 
@@ -58,7 +62,7 @@ class TrackedPose:
     def from_record(cls, name: str, record: ToolRecord, host_time_s: float) -> TrackedPose:
         if record.status is HandleStatus.DISABLED:
             status = ToolStatus.DISABLED
-        elif (record.port_status or 0) & PortStatus.OUT_OF_VOLUME:
+        elif (record.port_status or 0) & _OUT_OF_VOLUME:
             status = ToolStatus.OUT_OF_VOLUME
         elif record.status is HandleStatus.MISSING:
             status = ToolStatus.MISSING
@@ -69,8 +73,8 @@ class TrackedPose:
             name=name,
             handle=record.handle,
             status=status,
-            orientation=tuple(float(v) for v in t.quaternion) if t else None,  # type: ignore[arg-type]
-            position_mm=tuple(float(v) for v in t.translation_mm) if t else None,  # type: ignore[arg-type]
+            orientation=tuple(map(float, t.quaternion)) if t else None,  # type: ignore[arg-type]
+            position_mm=tuple(map(float, t.translation_mm)) if t else None,  # type: ignore[arg-type]
             rms_error_mm=float(t.rms_error_mm) if t else None,
             frame_number=record.frame_number,
             port_status=record.port_status,
