@@ -8,8 +8,8 @@ who has run the demo still waited over a minute in the first `diagnose`, its wor
 processes compiling the general variants, silently. `make demo` and `make test` run this
 command as part of the set-up, where waiting is expected.
 
-It runs, in this one process, what reaches every kernel: the paper's calibration poses on
-the twin, then a diagnosis of them with both models and every library effect (solves,
+It runs, in this one process, what reaches every kernel: the paper's protocol on the
+twin, then a diagnosis of its steps with both models and every library effect (solves,
 sensitivities, calibration, online estimation), and a few emulated IMU and tracker
 frames. One process, because numba's cache index is not safe against two processes
 adding different variants of one kernel at the same moment.
@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 from rich.console import Console
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -99,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
     started = time.perf_counter()
     console.print("compiling the kernels (once per checkout: a few minutes on a 2-core machine, "
-                  "seconds when already compiled)", highlight=False)
-    compile_kernels(lambda message: console.print(f"  {message}", highlight=False))
+                  "seconds when already compiled)", highlight=False, soft_wrap=True)
+    compile_kernels(lambda message: console.print(f"  {message}", highlight=False, soft_wrap=True))
     console.print(f"kernels ready in {time.perf_counter() - started:.0f} s", highlight=False)
     return 0
