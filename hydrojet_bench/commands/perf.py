@@ -130,8 +130,8 @@ def benchmark(runs: int) -> dict:
     results["numba"] = {
         "import_and_first_solves_s": round(import_and_first_solve_s, 3),
         "first_cosserat_solve_s": round(first_solve_s, 3),
-        "note": "kernels are compiled with cache=True: the first run on a fresh clone compiles "
-                "(several seconds); later runs load the cache from __pycache__",
+        "note": "kernels are compiled with cache=True, once, by `hydrojet-bench warmup` (part of the "
+                "make set-up); later runs load the cache from __pycache__",
     }
     results["setup"] = {
         "runs": runs, "jet_forces_n": jets.tolist(), "warm_start_load_change": 0.04,
