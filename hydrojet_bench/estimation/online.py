@@ -212,7 +212,7 @@ def _update_kernel(kind, resolution, tolerance, max_iterations, profile, packed_
     for i in range(3):
         tip[kernels.TIP_FOLLOWER_MOMENT + i] = (packed_tip[kernels.TIP_FOLLOWER_MOMENT + i]
                                                 + (moment[i] - params_moment[i]) / moment_scale)
-    kernels.solve(kind, resolution, reference, jacobian, True, profile, tip, base, beta, 1.0, tolerance,
+    kernels.solve(kind, resolution, reference, jacobian, np.bool_(True), profile, tip, base, beta, 1.0, tolerance,
                   max_iterations, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation, info)
     if info[0] != kernels.CONVERGED:
         return -1
@@ -221,6 +221,9 @@ def _update_kernel(kind, resolution, tolerance, max_iterations, profile, packed_
     error = math.degrees(kernels.relative_rotation_vector(
         kernels.sensor_rotation(base_sensor_mounting, tip_frame, tip_sensor_mounting), measured, omega))
     errors_deg[0] = error
+    # A writable copy: numba types a global array as read-only, a type of its own, and
+    # would compile `tip_wrench_sensitivity` once more for it.
+    components = _MOMENT_COMPONENTS.copy()
     steps = np.empty(3)
     columns = np.empty((6, 3))
     matrix = np.empty((3, 3))
@@ -231,7 +234,7 @@ def _update_kernel(kind, resolution, tolerance, max_iterations, profile, packed_
         for i in range(3):
             steps[i] = DEFAULT_RELATIVE_STEP * max(abs(moment[i]), _MOMENT_SCALES[i]) / moment_scale
         if not kernels.tip_wrench_sensitivity(kind, resolution, tip_frame, profile, tip, base, beta,
-                                              _MOMENT_COMPONENTS, steps, length, jacobian, columns):
+                                              components, steps, length, jacobian, columns):
             return -1
         for i in range(3):
             for j in range(3):
@@ -242,7 +245,7 @@ def _update_kernel(kind, resolution, tolerance, max_iterations, profile, packed_
             tip[kernels.TIP_FOLLOWER_MOMENT + i] = (packed_tip[kernels.TIP_FOLLOWER_MOMENT + i]
                                                     + (moment[i] - params_moment[i]) / moment_scale)
         start = kernels.turned(tip_frame, turn)
-        kernels.solve(kind, resolution, start, jacobian, True, profile, tip, base, beta, 1.0, tolerance,
+        kernels.solve(kind, resolution, start, jacobian, np.bool_(True), profile, tip, base, beta, 1.0, tolerance,
                       max_iterations, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation, info)
         if info[0] != kernels.CONVERGED:
             return -1

@@ -29,6 +29,11 @@ Newton solve of the section law and the distributed-moment products: a fifth les
 per shot (2.0 -> 1.55 us) than the general kernel, which tests for them at every RK4
 stage, and a tenth less per tangent shot.
 
+Flags passed from one kernel to another are written ``np.bool_(True)``, not ``True``:
+numba compiles a callee once per *literal* value of an argument, and each copy of a
+solver-sized kernel costs seconds of compiling (`hydrojet-bench warmup`) for nothing at
+run time.
+
 Everything here is nondimensional: lengths by L, moments by EI_ref / L and forces by
 EI_ref / L^2 (EI_ref = E0 * I), so the unknowns and residuals are of order one and a
 single tolerance means the same for every rod. `hydrojet_bench.models.shooting` does the
@@ -360,7 +365,7 @@ def _tip_state(x, reference, tip, load_scale, y, work):
     y[0] = 0.0
     y[1] = 0.0
     y[2] = 0.0
-    _tip_wrench(y[3:12], tip, load_scale, True, y[12:18])
+    _tip_wrench(y[3:12], tip, load_scale, np.bool_(True), y[12:18])
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -717,7 +722,7 @@ def _orientation_seeds(y, tip, load_scale, tangents, dn, wrench):
             seed[3 * i + d] = 0.0
             seed[3 * i + a1] = y[3 + 3 * i + a2]
             seed[3 * i + a2] = -y[3 + 3 * i + a1]
-        _tip_wrench(seed, tip, load_scale, False, wrench)
+        _tip_wrench(seed, tip, load_scale, np.bool_(False), wrench)
         tangents[0, d] = tangents[1, d] = tangents[2, d] = 0.0
         for k in range(9):
             tangents[3 + k, d] = seed[k]
@@ -888,7 +893,7 @@ def _finite_difference_jacobian(kind, resolution, x, reference, r, profile, tip,
         h = 1.5e-8 * max(1.0, abs(x[j]))
         trial[j] = x[j] + h
         shoot(kind, resolution, trial, reference, profile, tip, base, beta, load_scale, r_trial, y,
-              work, nodes_p, nodes_r, False)
+              work, nodes_p, nodes_r, np.bool_(False))
         for i in range(3):
             jacobian[i, j] = (r_trial[i] - r[i]) / h
         trial[j] = x[j]
@@ -947,7 +952,7 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
     # Every shot but those building the Jacobian stores its nodes, so the last accepted
     # shot's shape is already in place when the iteration stops.
     shoot(kind, resolution, x, reference, profile, tip, base, beta, load_scale, r, y, work,
-          nodes_p, nodes_r, True)
+          nodes_p, nodes_r, np.bool_(True))
     for k in range(18):
         clamp_state[k] = y[k]
     norm = _norm3(r)
@@ -968,7 +973,7 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
         if not have_jacobian:
             if kind == COSSERAT:
                 shoot_with_jacobian(resolution, x, reference, profile, tip, base, beta, load_scale, r_new, jacobian,
-                                    y, work, nodes_p, nodes_r, False)
+                                    y, work, nodes_p, nodes_r, np.bool_(False))
             else:
                 _finite_difference_jacobian(kind, resolution, x, reference, r, profile, tip, base, beta,
                                             load_scale, jacobian, y, work, nodes_p, nodes_r)
@@ -984,7 +989,7 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
                 for k in range(3):
                     x_new[k] = -alpha * step[k]
                 shoot(kind, resolution, x_new, reference, profile, tip, base, beta, load_scale, r_new, y,
-                      work, nodes_p, nodes_r, True)
+                      work, nodes_p, nodes_r, np.bool_(True))
                 new_norm = _norm3(r_new)
                 if np.isfinite(new_norm) and new_norm < (1.0 - 1e-4 * alpha) * norm:
                     accepted = True
@@ -1056,9 +1061,9 @@ def solve_batch(kind, resolution, references, jacobians, seeded, profile, tips, 
                 for j in range(3):
                     references[k, i, j] = nodes_r[k - 1, last, i, j]
                     jacobians[k, i, j] = jacobians[k - 1, i, j]
-        solve(kind, resolution, references[k], jacobians[k], True, profile, tips[k], base, beta, 1.0, tolerance,
-              max_iterations, length, wrench_scale, nodes_p[k], nodes_r[k], base_wrench[k], clamp_rotation[k],
-              info[k])
+        solve(kind, resolution, references[k], jacobians[k], np.bool_(True), profile, tips[k], base, beta, 1.0,
+              tolerance, max_iterations, length, wrench_scale, nodes_p[k], nodes_r[k], base_wrench[k],
+              clamp_rotation[k], info[k])
         if info[k, 0] != CONVERGED:
             return k
     return tips.shape[0]
@@ -1168,12 +1173,12 @@ def tip_wrench_sensitivity(kind, resolution, reference, profile, tip, base, beta
                 else:
                     tangents[12 + i, 3 + column] = y[3 + 3 * i + component - 3]
         _shoot_tangents(resolution, profile, tip, base, beta, 1.0, residual, partials[:3], y, tangents, dn, work,
-                        nodes_p, nodes_r, False)
+                        nodes_p, nodes_r, np.bool_(False))
         partials[3:] = tangents[:3]
     else:
         r = np.empty(3)
         shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, residual, y, work, nodes_p, nodes_r,
-              False)
+              np.bool_(False))
         p0x, p0y, p0z = y[0], y[1], y[2]
         perturbed_tip = tip.copy()
         for column in range(3 + count):
@@ -1182,14 +1187,14 @@ def tip_wrench_sensitivity(kind, resolution, reference, profile, tip, base, beta
                 step = 1.5e-8
                 x[column] = step
                 shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, r, y, work, nodes_p, nodes_r,
-                      False)
+                      np.bool_(False))
                 x[column] = 0.0
             else:
                 index = TIP_FOLLOWER_FORCE + components[column - 3]
                 step = steps[column - 3]
                 perturbed_tip[index] = tip[index] + step
                 shoot(kind, resolution, x, reference, profile, perturbed_tip, base, beta, 1.0, r, y, work,
-                      nodes_p, nodes_r, False)
+                      nodes_p, nodes_r, np.bool_(False))
                 perturbed_tip[index] = tip[index]
             for i in range(3):
                 partials[i, column] = (r[i] - residual[i]) / step
