@@ -29,10 +29,12 @@ Newton solve of the section law and the distributed-moment products: a fifth les
 per shot (2.0 -> 1.55 us) than the general kernel, which tests for them at every RK4
 stage, and a tenth less per tangent shot.
 
-Flags passed from one kernel to another are written ``np.bool_(True)``, not ``True``:
-numba compiles a callee once per *literal* value of an argument, and each copy of a
-solver-sized kernel costs seconds of compiling (`hydrojet-bench warmup`) for nothing at
-run time.
+Every shot stores its nodes, even one whose shape nobody reads (a Jacobian's): a flag
+saying whether to store cost 2-4 % of a warm solve as a run-time test in the RK4 loop,
+and as a literal doubled every kernel above the loop (numba compiles a callee once per
+literal argument value, and each copy of a solver-sized kernel costs seconds of
+compiling). Flags that remain between kernels are written ``np.bool_(True)`` for the
+same reason.
 
 Everything here is nondimensional: lengths by L, moments by EI_ref / L and forces by
 EI_ref / L^2 (EI_ref = E0 * I), so the unknowns and residuals are of order one and a
@@ -465,23 +467,21 @@ def _rk4_step(y, h, profile, row, load_scale, beta):
 
 
 @njit(cache=True, nogil=True)
-def _integrate_cosserat(steps, profile, load_scale, beta, y, nodes_p, nodes_r, store):
+def _integrate_cosserat(steps, profile, load_scale, beta, y, nodes_p, nodes_r):
     """RK4 from the tip (s = 1) back to the clamp (s = 0); the state array ``y`` is read
     at the tip and overwritten with the clamp state."""
     h = -1.0 / steps
     state = (y[0], y[1], y[2], y[3], y[4], y[5], y[6], y[7], y[8], y[9], y[10], y[11], y[12], y[13], y[14], y[15], y[16], y[17])
-    if store:
-        _store_node(y, steps, nodes_p, nodes_r)
+    _store_node(y, steps, nodes_p, nodes_r)
     for step in range(steps - 1, -1, -1):
         state = _rk4_step(state, h, profile, 2 * step + 2, load_scale, beta)
-        if store:
-            _store_node(state, step, nodes_p, nodes_r)
+        _store_node(state, step, nodes_p, nodes_r)
     for k in range(18):
         y[k] = state[k]
 
 
 @njit(cache=True, nogil=True, fastmath=_HOT)
-def _integrate_cosserat_tangent(steps, profile, load_scale, beta, y, tangents, dn, nodes_p, nodes_r, store):
+def _integrate_cosserat_tangent(steps, profile, load_scale, beta, y, tangents, dn, nodes_p, nodes_r):
     """`_integrate_cosserat` carrying tangents along: ``tangents`` (15, D: dp, dR, dm per
     direction) is read at the tip and overwritten at the clamp; ``dn`` (3, D) is constant
     along the rod. The tangents go through the very stages of each RK4 step, so they are
@@ -495,8 +495,7 @@ def _integrate_cosserat_tangent(steps, profile, load_scale, beta, y, tangents, d
     k3 = np.empty((15, directions))
     k4 = np.empty((15, directions))
     state = (y[0], y[1], y[2], y[3], y[4], y[5], y[6], y[7], y[8], y[9], y[10], y[11], y[12], y[13], y[14], y[15], y[16], y[17])
-    if store:
-        _store_node(state, steps, nodes_p, nodes_r)
+    _store_node(state, steps, nodes_p, nodes_r)
     for step in range(steps - 1, -1, -1):
         row = 2 * step + 2
         new, t2, t3, t4, u1, u2, u3, u4 = _rk4_stages(state, h, profile, row, load_scale, beta)
@@ -513,8 +512,7 @@ def _integrate_cosserat_tangent(steps, profile, load_scale, beta, y, tangents, d
             for d in range(directions):
                 tangents[k, d] += sixth * (k1[k, d] + 2.0 * (k2[k, d] + k3[k, d]) + k4[k, d])
         state = new
-        if store:
-            _store_node(state, step, nodes_p, nodes_r)
+        _store_node(state, step, nodes_p, nodes_r)
     for k in range(18):
         y[k] = state[k]
 
@@ -622,7 +620,7 @@ def _joint_curvature(profile, row, load_scale, beta, segment, mx, my, mz):
 
 
 @njit(cache=True, nogil=True)
-def _propagate_prb(joints, profile, load_scale, beta, y, work, nodes_p, nodes_r, store):
+def _propagate_prb(joints, profile, load_scale, beta, y, work, nodes_p, nodes_r):
     """PRB chain from the tip back to the clamp. ``joints`` spherical joints sit at
     s = (j - 1/2) / joints, j = 1..joints, joined by full links with half links at both
     ends (joints + 1 links in all). Each joint lumps one rod segment of length
@@ -633,12 +631,10 @@ def _propagate_prb(joints, profile, load_scale, beta, y, work, nodes_p, nodes_r,
     segment = 1.0 / joints
     relative = work
     rotation = np.empty((3, 3))
-    if store:
-        _store_node(y, joints + 1, nodes_p, nodes_r)
+    _store_node(y, joints + 1, nodes_p, nodes_r)
     _rigid_link(y, 0.5 * segment, profile, 2 * joints, 2 * joints - 1, load_scale)
     for joint in range(joints - 1, -1, -1):
-        if store:
-            _store_node(y, joint + 1, nodes_p, nodes_r)
+        _store_node(y, joint + 1, nodes_p, nodes_r)
         row = 2 * joint + 1
         mx = y[3] * y[15] + y[6] * y[16] + y[9] * y[17]
         my = y[4] * y[15] + y[7] * y[16] + y[10] * y[17]
@@ -657,8 +653,7 @@ def _propagate_prb(joints, profile, load_scale, beta, y, work, nodes_p, nodes_r,
             _rigid_link(y, segment, profile, 2 * joint, 2 * joint, load_scale)
         else:
             _rigid_link(y, 0.5 * segment, profile, 1, 0, load_scale)
-    if store:
-        _store_node(y, 0, nodes_p, nodes_r)
+    _store_node(y, 0, nodes_p, nodes_r)
 
 
 @njit(cache=True, nogil=True)
@@ -698,14 +693,14 @@ def _clamp_residual(y, base, residual, work):
 
 @njit(cache=True, nogil=True)
 def shoot(kind, resolution, x, reference, profile, tip, base, beta, load_scale, residual, y,
-          work, nodes_p, nodes_r, store):
+          work, nodes_p, nodes_r):
     """From the tip unknown ``x`` back to the clamp; write the clamp residual. ``y`` holds
     the clamp state afterwards (positions relative to the tip)."""
     _tip_state(x, reference, tip, load_scale, y, work)
     if kind == COSSERAT:
-        _integrate_cosserat(resolution, profile, load_scale, beta, y, nodes_p, nodes_r, store)
+        _integrate_cosserat(resolution, profile, load_scale, beta, y, nodes_p, nodes_r)
     else:
-        _propagate_prb(resolution, profile, load_scale, beta, y, work, nodes_p, nodes_r, store)
+        _propagate_prb(resolution, profile, load_scale, beta, y, work, nodes_p, nodes_r)
     _clamp_residual(y, base, residual, work)
 
 
@@ -825,7 +820,7 @@ def _residual_tangents(y, base, tangents, work, out):
 
 @njit(cache=True, nogil=True)
 def _shoot_tangents(resolution, profile, tip, base, beta, load_scale, residual, derivatives, y, tangents, dn, work,
-                    nodes_p, nodes_r, store):
+                    nodes_p, nodes_r):
     """A Cosserat `shoot` from the tip state in ``y`` (`_tip_state`) that carries tangents
     along: columns 0-2 of ``tangents``/``dn`` are seeded here with the tip orientation's
     right perturbations, R_L exp(e_d); columns from 3 on are the caller's (other tip loads).
@@ -833,21 +828,21 @@ def _shoot_tangents(resolution, profile, tip, base, beta, load_scale, residual, 
     Jacobian of the residual in the unknown re-anchored at this shot's tip,
     d r / d x' for R_L exp(x'). ``tangents`` holds the clamp state's derivatives after."""
     _orientation_seeds(y, tip, load_scale, tangents, dn, np.empty(6))
-    _integrate_cosserat_tangent(resolution, profile, load_scale, beta, y, tangents, dn, nodes_p, nodes_r, store)
+    _integrate_cosserat_tangent(resolution, profile, load_scale, beta, y, tangents, dn, nodes_p, nodes_r)
     _clamp_residual(y, base, residual, work)
     _residual_tangents(y, base, tangents, work, derivatives)
 
 
 @njit(cache=True, nogil=True)
 def shoot_with_jacobian(resolution, x, reference, profile, tip, base, beta, load_scale, residual, jacobian, y,
-                        work, nodes_p, nodes_r, store):
+                        work, nodes_p, nodes_r):
     """`shoot` for the Cosserat rod that also writes the exact Jacobian of the residual in
     the right perturbation of this shot's tip orientation (see `_shoot_tangents`)."""
     tangents = np.empty((15, 3))
     dn = np.empty((3, 3))
     _tip_state(x, reference, tip, load_scale, y, work)
     _shoot_tangents(resolution, profile, tip, base, beta, load_scale, residual, jacobian, y, tangents, dn, work,
-                    nodes_p, nodes_r, store)
+                    nodes_p, nodes_r)
 
 
 @njit(cache=True, nogil=True)
@@ -893,7 +888,7 @@ def _finite_difference_jacobian(kind, resolution, x, reference, r, profile, tip,
         h = 1.5e-8 * max(1.0, abs(x[j]))
         trial[j] = x[j] + h
         shoot(kind, resolution, trial, reference, profile, tip, base, beta, load_scale, r_trial, y,
-              work, nodes_p, nodes_r, np.bool_(False))
+              work, nodes_p, nodes_r)
         for i in range(3):
             jacobian[i, j] = (r_trial[i] - r[i]) / h
         trial[j] = x[j]
@@ -949,10 +944,10 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
     step = np.empty(3)
     x_new = np.empty(3)
     clamp_state = np.empty(18)
-    # Every shot but those building the Jacobian stores its nodes, so the last accepted
-    # shot's shape is already in place when the iteration stops.
+    # Every shot stores its nodes, and the last shot before convergence is the accepted
+    # step's (a Jacobian is only built before a step), so its shape is in place at the end.
     shoot(kind, resolution, x, reference, profile, tip, base, beta, load_scale, r, y, work,
-          nodes_p, nodes_r, np.bool_(True))
+          nodes_p, nodes_r)
     for k in range(18):
         clamp_state[k] = y[k]
     norm = _norm3(r)
@@ -973,7 +968,7 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
         if not have_jacobian:
             if kind == COSSERAT:
                 shoot_with_jacobian(resolution, x, reference, profile, tip, base, beta, load_scale, r_new, jacobian,
-                                    y, work, nodes_p, nodes_r, np.bool_(False))
+                                    y, work, nodes_p, nodes_r)
             else:
                 _finite_difference_jacobian(kind, resolution, x, reference, r, profile, tip, base, beta,
                                             load_scale, jacobian, y, work, nodes_p, nodes_r)
@@ -989,7 +984,7 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
                 for k in range(3):
                     x_new[k] = -alpha * step[k]
                 shoot(kind, resolution, x_new, reference, profile, tip, base, beta, load_scale, r_new, y,
-                      work, nodes_p, nodes_r, np.bool_(True))
+                      work, nodes_p, nodes_r)
                 new_norm = _norm3(r_new)
                 if np.isfinite(new_norm) and new_norm < (1.0 - 1e-4 * alpha) * norm:
                     accepted = True
@@ -1155,8 +1150,10 @@ def tip_wrench_sensitivity(kind, resolution, reference, profile, tip, base, beta
     work = np.empty((3, 3))
     x = np.zeros(3)
     residual = np.empty(3)
-    nodes_p = np.empty((1, 3))
-    nodes_r = np.empty((1, 3, 3))
+    # The shots store their nodes (cheaper than a test per step); nobody reads them here.
+    nodes = resolution + 1 if kind == COSSERAT else resolution + 2
+    nodes_p = np.empty((nodes, 3))
+    nodes_r = np.empty((nodes, 3, 3))
     # Partials: residual (rows 0-2) and clamp position (rows 3-5) per unit of each
     # tip-orientation direction (columns 0-2) and each component (columns 3 on).
     partials = np.empty((6, 3 + count))
@@ -1173,12 +1170,11 @@ def tip_wrench_sensitivity(kind, resolution, reference, profile, tip, base, beta
                 else:
                     tangents[12 + i, 3 + column] = y[3 + 3 * i + component - 3]
         _shoot_tangents(resolution, profile, tip, base, beta, 1.0, residual, partials[:3], y, tangents, dn, work,
-                        nodes_p, nodes_r, np.bool_(False))
+                        nodes_p, nodes_r)
         partials[3:] = tangents[:3]
     else:
         r = np.empty(3)
-        shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, residual, y, work, nodes_p, nodes_r,
-              np.bool_(False))
+        shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, residual, y, work, nodes_p, nodes_r)
         p0x, p0y, p0z = y[0], y[1], y[2]
         perturbed_tip = tip.copy()
         for column in range(3 + count):
@@ -1186,15 +1182,14 @@ def tip_wrench_sensitivity(kind, resolution, reference, profile, tip, base, beta
                 # sqrt(machine epsilon): the residual is smooth and evaluated to rounding error.
                 step = 1.5e-8
                 x[column] = step
-                shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, r, y, work, nodes_p, nodes_r,
-                      np.bool_(False))
+                shoot(kind, resolution, x, reference, profile, tip, base, beta, 1.0, r, y, work, nodes_p, nodes_r)
                 x[column] = 0.0
             else:
                 index = TIP_FOLLOWER_FORCE + components[column - 3]
                 step = steps[column - 3]
                 perturbed_tip[index] = tip[index] + step
                 shoot(kind, resolution, x, reference, profile, perturbed_tip, base, beta, 1.0, r, y, work,
-                      nodes_p, nodes_r, np.bool_(False))
+                      nodes_p, nodes_r)
                 perturbed_tip[index] = tip[index]
             for i in range(3):
                 partials[i, column] = (r[i] - residual[i]) / step

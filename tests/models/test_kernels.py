@@ -41,7 +41,7 @@ def _shot(x, reference, profile, tip, base, beta):
     residual, y = np.empty(3), np.empty(18)
     nodes_p, nodes_r = np.empty((RESOLUTION + 1, 3)), np.empty((RESOLUTION + 1, 3, 3))
     kernels.shoot(kernels.COSSERAT, RESOLUTION, x, reference, profile, tip, base, beta, 1.0, residual, y,
-                  np.empty((3, 3)), nodes_p, nodes_r, False)
+                  np.empty((3, 3)), nodes_p, nodes_r)
     return residual
 
 
@@ -54,7 +54,7 @@ def test_the_tangent_jacobian_is_the_derivative_of_the_discrete_shot(seed, beta,
     residual, jacobian = np.empty(3), np.empty((3, 3))
     nodes_p, nodes_r = np.empty((RESOLUTION + 1, 3)), np.empty((RESOLUTION + 1, 3, 3))
     kernels.shoot_with_jacobian(RESOLUTION, x, reference, profile, tip, base, beta, 1.0, residual, jacobian,
-                                np.empty(18), np.empty((3, 3)), nodes_p, nodes_r, False)
+                                np.empty(18), np.empty((3, 3)), nodes_p, nodes_r)
     assert np.all(np.isfinite(residual))
     np.testing.assert_allclose(residual, _shot(x, reference, profile, tip, base, beta), rtol=1e-12, atol=1e-14)
     # The Jacobian is in the unknown re-anchored at the shot's tip: R_L exp(x').
@@ -83,7 +83,7 @@ def test_the_plain_rod_kernel_is_the_general_kernel_without_its_terms(seed):
         residual, jacobian, y = np.empty(3), np.empty((3, 3)), np.empty(18)
         nodes_p, nodes_r = np.empty((RESOLUTION + 1, 3)), np.empty((RESOLUTION + 1, 3, 3))
         kernels.shoot_with_jacobian(RESOLUTION, x, reference, profile, tip, base, beta, 1.0, residual, jacobian,
-                                    y, np.empty((3, 3)), nodes_p, nodes_r, True)
+                                    y, np.empty((3, 3)), nodes_p, nodes_r)
         shots[beta] = (residual, jacobian, y, nodes_p, nodes_r)
     for general, plain in zip(shots[0.0], shots[None]):
         np.testing.assert_allclose(plain, general, rtol=1e-12, atol=1e-14)
@@ -94,7 +94,7 @@ def test_the_plain_rod_kernel_is_the_general_kernel_without_its_terms(seed):
         residual, y = np.empty(3), np.empty(18)
         nodes_p, nodes_r = np.empty((RESOLUTION + 2, 3)), np.empty((RESOLUTION + 2, 3, 3))
         kernels.shoot(kernels.PRB, RESOLUTION, x, reference, profile, tip, base, beta, 1.0, residual, y,
-                      np.empty((3, 3)), nodes_p, nodes_r, True)
+                      np.empty((3, 3)), nodes_p, nodes_r)
         chain[beta] = (residual, y, nodes_p, nodes_r)
     for general, plain in zip(chain[0.0], chain[None]):
         np.testing.assert_allclose(plain, general, rtol=1e-12, atol=1e-14)
