@@ -206,6 +206,9 @@ class Session:
         # samples; a real device's time is the wall's.
         self.clock = clock or (PacedClock if request.settings.transports.all_simulated
                                else ScaledClock)(request.settings.session.time_scale)
+        # The clock that waits for the host, if this is one: it needs its pacing task,
+        # and the time it held back is reported.
+        self._paced = self.clock if isinstance(self.clock, PacedClock) else None
         self.status = SessionStatus(len(request.plan))
         self.on_update = on_update or (lambda status: None)
         profile = request.profile
@@ -282,7 +285,7 @@ class Session:
                              tuple(self.estimates), steps, self._overall_rates, self.checks,
                              self.calibration_warnings, None if armed is None else armed[0],
                              None if armed is None else armed[1] - started,
-                             self.clock.held_wall_s if isinstance(self.clock, PacedClock) else 0.0, kept)
+                             0.0 if self._paced is None else self._paced.held_wall_s, kept)
 
     def event(self, level: str, source: str, message: str) -> None:
         t_s = self.clock.now()
@@ -310,8 +313,8 @@ class Session:
             async with asyncio.TaskGroup() as group:
                 streams = [group.create_task(self._em_stream(rig.tracker), name="em-stream"),
                            group.create_task(self._estimate_steps(), name="estimation")]
-                if isinstance(self.clock, PacedClock):
-                    streams.append(group.create_task(self.clock.keep_pace(), name="session-clock"))
+                if self._paced is not None:
+                    streams.append(group.create_task(self._paced.keep_pace(), name="session-clock"))
                 imu_stream = None
                 if rig.imus is not None:
                     imu_stream = group.create_task(self._imu_stream(rig.imus), name="imu-stream")
@@ -558,9 +561,9 @@ class Session:
             if figure.below_warning:
                 self.event("warning", figure.stream, f"below its configured rate: {figure.describe()}")
         self._overall_rates = figures
-        if isinstance(self.clock, PacedClock) and self.clock.held_wall_s > 0.0:
-            self.event("info", "session", f"x{self._time_scale_kept():.1f} kept of x{self.clock.time_scale:g}: "
-                       f"session time waited {self.clock.held_wall_s:.1f} s of wall time for the host, "
+        if self._paced is not None and self._paced.held_wall_s > 0.0:
+            self.event("info", "session", f"x{self._time_scale_kept():.1f} kept of x{self._paced.time_scale:g}: "
+                       f"session time waited {self._paced.held_wall_s:.1f} s of wall time for the host, "
                        "so the emulated devices lost no samples to it")
 
     def _time_scale_kept(self) -> float | None:
