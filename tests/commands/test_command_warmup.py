@@ -51,7 +51,6 @@ def test_warmup_says_what_it_does_and_compiles_every_kernel_and_both_variants_of
             "_update_kernel", "settling_states_into", "_fifo_run", "_crc16_of_bytes"} <= set(called.split())
 
 
-
 def test_no_kernel_passes_a_literal_flag_to_another():
     # Numba compiles a callee once per literal argument value: `solve` called with a bare
     # True beside a bool, and `shoot` with True and False, doubled the warm-up (198 s
