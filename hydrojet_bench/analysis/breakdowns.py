@@ -366,14 +366,25 @@ def loading_split(comparison: Comparison, steps: Dataset) -> LoadingSplit:
         return summarise(orientation[rows], None if position is None else position[rows])
 
     pairs = _matched_pairs(steps, phases)
-    gap_deg = gap_mm = None
-    if len(pairs):
-        residual = orientation_residuals_deg(comparison.predictions, steps)
-        gap_deg = float(np.mean(np.linalg.norm(residual[pairs[:, 0]] - residual[pairs[:, 1]], axis=1)))
-        offsets = position_residuals_mm(comparison.predictions, steps)
-        if offsets is not None:
-            gap_mm = float(np.mean(np.linalg.norm(offsets[pairs[:, 0]] - offsets[pairs[:, 1]], axis=1)))
+    gap_deg, gap_mm = hysteresis_gaps(comparison.predictions, steps, pairs)
     return LoadingSplit(summary(LOADING), summary(UNLOADING), len(pairs), gap_deg, gap_mm)
+
+
+def hysteresis_gaps(predictions: Predictions, steps: Dataset,
+                    pairs: np.ndarray | None = None) -> tuple[float | None, float | None]:
+    """`LoadingSplit`'s hysteresis gaps (deg, mm; None without matched pairs or measured
+    positions) over ``pairs`` (default: `_matched_pairs`). Needs only the predictions, not
+    a whole `compare`: a diagnosis asks for it once per candidate."""
+    if pairs is None:
+        pairs = _matched_pairs(steps, load_phases(steps))
+    if not len(pairs):
+        return None, None
+    residual = orientation_residuals_deg(predictions, steps)
+    gap_deg = float(np.mean(np.linalg.norm(residual[pairs[:, 0]] - residual[pairs[:, 1]], axis=1)))
+    offsets = position_residuals_mm(predictions, steps)
+    gap_mm = (None if offsets is None
+              else float(np.mean(np.linalg.norm(offsets[pairs[:, 0]] - offsets[pairs[:, 1]], axis=1))))
+    return gap_deg, gap_mm
 
 
 def drift(orientation_deg: np.ndarray, position_mm: np.ndarray | None, time_s: np.ndarray,

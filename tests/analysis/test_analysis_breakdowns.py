@@ -17,9 +17,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hydrojet_bench.analysis.breakdowns import (NOISE_GAP_PER_FLOOR, break_down, direction_labels,
-                                                disturbance_by_sweep, driving_jet_labels, drift, load_phases,
-                                                loading_split, noise_only_gap, orientation_residuals_deg, per_step,
-                                                worst_poses)
+                                                disturbance_by_sweep, driving_jet_labels, drift, hysteresis_gaps,
+                                                load_phases, loading_split, noise_only_gap, orientation_residuals_deg,
+                                                per_step, worst_poses)
 from hydrojet_bench.analysis.compare import compare
 from hydrojet_bench.estimation.path import Predictions
 from hydrojet_bench.data.dataset import Dataset
@@ -122,11 +122,15 @@ def test_hysteresis_gap_sees_a_model_midway_between_the_branches():
     branches apart, the gap between error vectors does."""
     steps = sweep_steps()
     sign = np.where(load_phases(steps) == "unloading", -1.0, 1.0)[:, None]
-    split = loading_split(compare(predictions_with(steps, sign * [0.0, 1.5, 0.0], sign * [0.5, 0.0, 0.0]),
-                                  steps), steps)
+    predictions = predictions_with(steps, sign * [0.0, 1.5, 0.0], sign * [0.5, 0.0, 0.0])
+    split = loading_split(compare(predictions, steps), steps)
     assert split.loading.orientation_rmse_deg == pytest.approx(split.unloading.orientation_rmse_deg)
     assert split.hysteresis_gap_deg == pytest.approx(3.0)
     assert split.hysteresis_gap_mm == pytest.approx(1.0)
+    # The gaps alone, as a diagnosis asks for them per candidate: the split's own figures.
+    assert hysteresis_gaps(predictions, steps) == (split.hysteresis_gap_deg, split.hysteresis_gap_mm)
+    flat = make_steps(np.zeros(3), np.zeros(3))
+    assert hysteresis_gaps(predictions_with(flat, [1.0, 0.0, 0.0]), flat) == (None, None)
 
 
 def test_error_in_one_bending_direction_shows_in_its_sector_and_region():

@@ -29,8 +29,7 @@ from ...geometry import body_rotation_error, matrix_from_quat, rotation_angle_de
 from ...models.shooting import ShootingModel
 from ...params import DISTURBANCE_MOMENT_NAMES, ModelParameters
 from ...sensitivity import sensitivity
-from ..breakdowns import NOISE_GAP_PER_FLOOR, driving_jet_labels, loading_split
-from ..compare import compare
+from ..breakdowns import NOISE_GAP_PER_FLOOR, driving_jet_labels, hysteresis_gaps
 
 
 def rotation_between(first: np.ndarray, second: np.ndarray) -> np.ndarray:
@@ -54,7 +53,7 @@ def rmse_by_jet(predictions: Predictions, steps: Dataset) -> dict[str, float]:
 def hysteresis_gap_deg(predictions: Predictions, steps: Dataset) -> float | None:
     """Mean norm of (unloading - loading) residual at matched forces (deg), see
     `breakdowns.loading_split`."""
-    return loading_split(compare(predictions, steps), steps).hysteresis_gap_deg
+    return hysteresis_gaps(predictions, steps)[0]
 
 
 @dataclass(frozen=True)
@@ -72,8 +71,10 @@ class OnlineEvidence:
 
     def equivalent_moment_nm(self, rotation_rad: np.ndarray) -> np.ndarray:
         """(n, 3) moments that turn the tip sensor by ``rotation_rad`` (n, 3) per step."""
-        return np.stack([np.linalg.lstsq(matrix, omega, rcond=None)[0]
-                         for matrix, omega in zip(self.moment_sensitivity, rotation_rad)])
+        # Least squares, minimum norm where a matrix is singular, for the whole stack at
+        # once: `lstsq`'s cut-off (eps x size), as one pseudo-inverse instead of a call a step.
+        inverse = np.linalg.pinv(self.moment_sensitivity, rtol=3 * np.finfo(float).eps)
+        return (inverse @ np.asarray(rotation_rad, dtype=float)[:, :, np.newaxis])[:, :, 0]
 
 
 def online_evidence(model: ShootingModel, params: ModelParameters, steps: Dataset, held_out: np.ndarray,
