@@ -136,10 +136,19 @@ def tip_sensors_in_base_sensor(solutions: Sequence[Solution]) -> np.ndarray:
     (a calibration asks for thousands; one call each cost more than its solve's set-up)."""
     if not len(solutions):
         return np.empty((0, 3, 3))
-    base = np.array([solution.base_sensor_mounting for solution in solutions])
     tip = np.array([solution.rotations_in_base[-1] for solution in solutions])
-    tip_mounting = np.array([solution.tip_sensor_mounting for solution in solutions])
-    return np.swapaxes(base, 1, 2) @ (tip @ tip_mounting)
+    return np.swapaxes(_stacked_mountings(solutions, "base_sensor_mounting"), -1, -2) @ (
+        tip @ _stacked_mountings(solutions, "tip_sensor_mounting"))
+
+
+def _stacked_mountings(solutions: Sequence[Solution], name: str) -> np.ndarray:
+    """The mounting array ``name`` of each solution, stacked; or the one array when every
+    solution shares it, as the solutions of one problem do (for 40 solutions the stack
+    cost more than the products it feeds)."""
+    first = getattr(solutions[0], name)
+    if all(getattr(solution, name) is first for solution in solutions):
+        return first
+    return np.array([getattr(solution, name) for solution in solutions])
 
 
 def tip_sensor_positions_in_base_sensor_m(solutions: Sequence[Solution], offsets_in_tip_m: np.ndarray) -> np.ndarray:
@@ -149,10 +158,10 @@ def tip_sensor_positions_in_base_sensor_m(solutions: Sequence[Solution], offsets
         return np.empty((0, 3))
     tip = np.array([solution.positions_in_base_m[-1] for solution in solutions])
     tip_rotation = np.array([solution.rotations_in_base[-1] for solution in solutions])
-    base = np.array([solution.base_sensor_mounting for solution in solutions])
-    origin = np.array([solution.base_sensor_offset_m for solution in solutions])
+    base = _stacked_mountings(solutions, "base_sensor_mounting")
+    origin = _stacked_mountings(solutions, "base_sensor_offset_m")
     point = tip + (tip_rotation @ offsets_in_tip_m[:, :, np.newaxis])[:, :, 0]
-    return (np.swapaxes(base, 1, 2) @ (point - origin)[:, :, np.newaxis])[:, :, 0] + origin
+    return (np.swapaxes(base, -1, -2) @ (point - origin)[:, :, np.newaxis])[:, :, 0] + origin
 
 
 # slots: a warm solve builds one per call (`with_jets`), and a slots instance costs half.
