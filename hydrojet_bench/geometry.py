@@ -266,7 +266,7 @@ def _rotvec_rows(q, out):
     for n in range(q.shape[0]):
         w, x, y, z = q[n, 0], q[n, 1], q[n, 2], q[n, 3]
         norm = np.sqrt(w * w + x * x + y * y + z * z)
-        if w / norm < 0.0:
+        if w < 0.0:
             norm = -norm  # the representative with w >= 0
         w, x, y, z = w / norm, x / norm, y / norm, z / norm
         sin_half = np.sqrt(x * x + y * y + z * z)

@@ -137,14 +137,14 @@ def tip_sensors_in_base_sensor(solutions: Sequence[Solution]) -> np.ndarray:
     if not len(solutions):
         return np.empty((0, 3, 3))
     tip = np.array([solution.rotations_in_base[-1] for solution in solutions])
-    return np.swapaxes(_stacked_mountings(solutions, "base_sensor_mounting"), -1, -2) @ (
-        tip @ _stacked_mountings(solutions, "tip_sensor_mounting"))
+    return np.swapaxes(_stacked(solutions, "base_sensor_mounting"), -1, -2) @ (
+        tip @ _stacked(solutions, "tip_sensor_mounting"))
 
 
-def _stacked_mountings(solutions: Sequence[Solution], name: str) -> np.ndarray:
-    """The mounting array ``name`` of each solution, stacked; or the one array when every
-    solution shares it, as the solutions of one problem do (for 40 solutions the stack
-    cost more than the products it feeds)."""
+def _stacked(solutions: Sequence[Solution], name: str) -> np.ndarray:
+    """The array field ``name`` (a sensor mounting or offset) of each solution, stacked; or
+    the one array when every solution shares it, as the solutions of one problem do (for
+    40 solutions the stack cost more than the products it feeds)."""
     first = getattr(solutions[0], name)
     if all(getattr(solution, name) is first for solution in solutions):
         return first
@@ -158,8 +158,8 @@ def tip_sensor_positions_in_base_sensor_m(solutions: Sequence[Solution], offsets
         return np.empty((0, 3))
     tip = np.array([solution.positions_in_base_m[-1] for solution in solutions])
     tip_rotation = np.array([solution.rotations_in_base[-1] for solution in solutions])
-    base = _stacked_mountings(solutions, "base_sensor_mounting")
-    origin = _stacked_mountings(solutions, "base_sensor_offset_m")
+    base = _stacked(solutions, "base_sensor_mounting")
+    origin = _stacked(solutions, "base_sensor_offset_m")
     point = tip + (tip_rotation @ offsets_in_tip_m[:, :, np.newaxis])[:, :, 0]
     return (np.swapaxes(base, -1, -2) @ (point - origin)[:, :, np.newaxis])[:, :, 0] + origin
 
