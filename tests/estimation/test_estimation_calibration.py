@@ -13,8 +13,9 @@ from hydrojet_bench.params import ModelParameters, with_parameters
 
 GRAVITY = (-9.81, 0.0, 0.0)
 INITIAL = ModelParameters(gravity_in_base_m_s2=GRAVITY)
-TRUTH = with_parameters(INITIAL, {"E0": 2.7e5, "EL": 1.7e5, "L": 0.071, "wd_mz": 2e-4, "wd_mx": 1e-4,
-                                  "wd_fy": 3e-3})
+TRUTH_VALUES = {"E0": 2.7e5, "EL": 1.7e5, "L": 0.071, "wd_fx": 0.0, "wd_fy": 3e-3, "wd_fz": 0.0,
+                "wd_mx": 1e-4, "wd_my": 0.0, "wd_mz": 2e-4}
+TRUTH = with_parameters(INITIAL, TRUTH_VALUES)
 
 
 def poses(count=40, seed=1, angle_noise_deg=0.0, position_noise_m=0.0):
@@ -99,10 +100,13 @@ def sweep_path(truth_model, truth, count=12, peak_n=0.1):
 
 
 def test_following_the_path_changes_nothing_without_path_state():
+    # The two take different trust-region methods (dogbox for independent poses, trf
+    # along a path), so they agree to the solvers' precision, not bit for bit: both
+    # reach the noise-free truth.
     plain = calibrate(CosseratModel(), poses(count=15), INITIAL)
     along = calibrate(CosseratModel(), poses(count=15), INITIAL, follow_path=True)
-    np.testing.assert_array_equal(along.values, plain.values)
-    assert along.evaluations == plain.evaluations
+    np.testing.assert_allclose(along.values, plain.values, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(plain.values, [TRUTH_VALUES[name] for name in plain.names], rtol=1e-8, atol=1e-10)
 
 
 def test_a_clamp_with_play_is_recovered_only_along_the_recorded_path():
@@ -181,8 +185,8 @@ class FoldingCosserat(CosseratModel):
 
 
 def test_a_trial_step_the_model_cannot_solve_is_shortened_not_fatal():
-    # The first trial step from E0 = 3e5 lands at 2.901e5 on these poses; the band holds it.
-    result = calibrate(FoldingCosserat((2.900e5, 2.902e5)), poses(), INITIAL)
+    # The first trial step from E0 = 3e5 lands at 3.0609e5 on these poses; the band holds it.
+    result = calibrate(FoldingCosserat((3.0605e5, 3.0612e5)), poses(), INITIAL)
     assert result.values[result.names.index("E0")] == pytest.approx(2.7e5, rel=1e-4)
     assert result.rms_orientation_deg_after < 1e-4
     assert "1 trial step(s) the model could not solve were shortened" in result.stop_reason
