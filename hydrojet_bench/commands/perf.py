@@ -186,11 +186,12 @@ def _imu_fusion_figure(runs: int) -> dict:
             "fusion": DEFAULT_FUSION, "update_us_by_fusion": per_fusion}
 
 
-def _calibration_figures(params) -> dict:
-    """Calibrate E0, EL, L and w_d on 40 random noisy poses of a known rod, per model."""
-    from ..estimation.calibration import CalibrationPose, calibrate
+def calibration_benchmark_poses(params) -> list:
+    """The calibration figure's 40 poses: random jets on a known rod (E0 2.7e5, EL 1.7e5
+    Pa, L 71 mm, wd_mz 2e-4 N m, else ``params``), orientations only, 0.7 deg of noise."""
+    from ..estimation.calibration import CalibrationPose
     from ..geometry import so3_exp
-    from ..models import CosseratModel, PrbModel
+    from ..models import CosseratModel
     from ..params import with_parameters
 
     truth = with_parameters(params, {"E0": 2.7e5, "EL": 1.7e5, "L": 0.071, "wd_mz": 2e-4})
@@ -201,6 +202,15 @@ def _calibration_figures(params) -> dict:
         shape = CosseratModel().solve(jets, truth)
         noise = so3_exp(rng.normal(0.0, np.radians(0.7) / np.sqrt(3), 3))
         poses.append(CalibrationPose(jets, shape.tip_sensor_in_base_sensor() @ noise, params.gravity_in_base_m_s2))
+    return poses
+
+
+def _calibration_figures(params) -> dict:
+    """Calibrate E0, EL, L and w_d on 40 random noisy poses of a known rod, per model."""
+    from ..estimation.calibration import calibrate
+    from ..models import CosseratModel, PrbModel
+
+    poses = calibration_benchmark_poses(params)
     figures = {}
     for model in (CosseratModel(), PrbModel()):
         runs = []

@@ -308,9 +308,10 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
     # Independent poses: dogbox. The fit has a narrow valley (E0, L and a force of w_d
     # correlate to 0.99); trust region reflective crawled along it, its trust region
     # holding each step to a fraction of a Gauss-Newton step that predicted the remaining
-    # gain well, and dogbox got through in fewer evaluations (README, Speed). Along a path (diagnosis fits, sweeps) trust region reflective
-    # stays: there a clamp's play makes the cost piecewise smooth, and dogbox left such a
-    # fit unconverged after 115 evaluations where trust region reflective converged.
+    # gain well, and dogbox got through in fewer evaluations (README, Speed). Along a
+    # path (diagnosis fits, sweeps) trust region reflective stays: there a clamp's play
+    # makes the cost piecewise smooth, and dogbox left such a fit unconverged after 115
+    # evaluations where trust region reflective converged.
     try:
         before = residual(start)
         fit = least_squares(lambda z: residual((z + offset) * scales), np.ones(len(names)), jac=scaled_jacobian,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hydrojet_bench.commands.perf import calibration_benchmark_poses
 from hydrojet_bench.errors import ConvergenceError
 from hydrojet_bench.estimation.calibration import CalibrationPose, calibrate
 from hydrojet_bench.geometry import so3_exp
@@ -57,15 +58,7 @@ def test_independent_poses_do_not_crawl_along_the_stiffness_length_valley():
     # perf's 40 orientation-only poses: E0, L and wd_fx correlate to 0.99 there. Trust
     # region reflective took 32 evaluations along that valley to the optimum, dogbox 18
     # to a cost no higher (see `calibrate`).
-    truth = with_parameters(INITIAL, {"E0": 2.7e5, "EL": 1.7e5, "L": 0.071, "wd_mz": 2e-4})
-    rng = np.random.default_rng(40)
-    measured = []
-    for _ in range(40):
-        jets = rng.uniform(0.0, 0.12, 3)
-        tilt = so3_exp(rng.normal(0.0, np.radians(0.7) / np.sqrt(3), 3))
-        measured.append(CalibrationPose(jets, CosseratModel().solve(jets, truth).tip_sensor_in_base_sensor() @ tilt,
-                                        GRAVITY))
-    result = calibrate(CosseratModel(), measured, INITIAL)
+    result = calibrate(CosseratModel(), calibration_benchmark_poses(INITIAL), INITIAL)
     assert result.evaluations <= 24, result.stop_reason
     assert result.rms_orientation_deg_after < 0.7503296  # trust region reflective: 0.75032960 deg
 
