@@ -1041,21 +1041,32 @@ def solve_from(kind, resolution, seed_rotation, seed_jacobian, have_jacobian, je
 
 
 @njit(cache=True, nogil=True)
-def solve_batch(kind, resolution, references, jacobians, seeded, profile, tips, base, beta, tolerance,
+def solve_batch(kind, resolution, references, jacobians, seeded, profiles, tips, bases, carry_clamp, beta, tolerance,
                 max_iterations, length, wrench_scale, nodes_p, nodes_r, base_wrench, clamp_rotation, info):
-    """Warm `solve` of k problems that differ only in their tip loads (``tips``, one row
-    each), in order and in one call: each problem's output arrays are the k-th slices of
-    ``references`` ... ``info``. A problem not ``seeded`` starts from the one before it:
-    its tip frame as that solution reports it and its updated matrix, as a sequence of
-    single warm solves would. The first problem must be seeded. Stops at the first
-    problem that does not converge and returns how many did."""
+    """Warm `solve` of k problems that differ in their tip loads (``tips``, one row
+    each) and possibly in their profiles and clamps (``profiles``, ``bases``: one row
+    shared by all, or one row each), in order and in one call: each problem's output
+    arrays are the k-th slices of ``references`` ... ``info``. A problem not ``seeded``
+    starts from the one before it: its tip frame as that solution reports it and its
+    updated matrix, as a sequence of single warm solves would. With ``carry_clamp`` each
+    problem after the first starts its clamp where the one before left it (the path
+    state `ShootingModel.prepare` takes from ``previous``). The first problem must be
+    seeded. Stops at the first problem that does not converge and returns how many did."""
     last = nodes_p.shape[1] - 1
+    base = np.empty(BASE_SIZE)
     for k in range(tips.shape[0]):
         if not seeded[k]:
             for i in range(3):
                 for j in range(3):
                     references[k, i, j] = nodes_r[k - 1, last, i, j]
                     jacobians[k, i, j] = jacobians[k - 1, i, j]
+        row_base = bases[0] if bases.shape[0] == 1 else bases[k]
+        for i in range(BASE_SIZE):
+            base[i] = row_base[i]
+        if carry_clamp and k > 0:
+            for i in range(3):
+                base[BASE_PREVIOUS_ROTATION + i] = clamp_rotation[k - 1, i]
+        profile = profiles[0] if profiles.shape[0] == 1 else profiles[k]
         solve(kind, resolution, references[k], jacobians[k], np.bool_(True), profile, tips[k], base, beta, 1.0,
               tolerance, max_iterations, length, wrench_scale, nodes_p[k], nodes_r[k], base_wrench[k],
               clamp_rotation[k], info[k])

@@ -451,10 +451,12 @@ class ShootingModel:
         bit; with ``along_path`` row i - 1's solution (row 0: ``seed``) is also its
         ``previous=`` (path state). The warm solves of a run of rows share one kernel
         call (`kernels.solve_batch`) instead of each paying its own Python set-up, which
-        is most of a warm solve's time in a calibration. A row the warm solve does not
-        finish, or with nothing to start from, takes `solve`'s whole path (cold start,
-        ramping); so does every row of a problem whose packing changes with the jets or
-        along the path (`shares_packing`)."""
+        is most of a warm solve's time in a calibration; so do the rows of a problem
+        whose packing changes with the jets (each row packed in Python) or along the path
+        (the clamp's state carried in the kernel). A row the warm solve does not finish,
+        or with nothing to start from, takes `solve`'s whole path (cold start, ramping);
+        so does every row when the rows' packings differ in more than the kernel takes
+        per row (`_one_kernel_call`)."""
         jets = np.asarray(jet_forces_n, dtype=float)
         if jets.ndim != 2 or jets.shape[1] != 3 or len(warm_starts) != len(jets):
             raise ValueError(f"jet_forces_n must be (k, 3) with one warm start per row, got shape {jets.shape} "
@@ -465,12 +467,24 @@ class ShootingModel:
         if not len(jets):
             return solutions
         template = self.prepare(jets[0], params)
-        shared = self.shares_packing(template)
+        # A packing that changes with the jets is made in Python (effects are Python) for
+        # each command, once (a sweep passes each command on its way up and down, and
+        # repeats); the kernel still solves the rows in one call. Path state is carried in
+        # the kernel from row to row.
+        packings = None
+        if self._uses_actuation:
+            by_command = {jets[0].tobytes(): template}
+            for row in jets[1:]:
+                if row.tobytes() not in by_command:
+                    by_command[row.tobytes()] = self.prepare(row, params)
+            packings = [by_command[row.tobytes()] for row in jets]
+        batched = packings is None or _one_kernel_call(packings)
+        carry = along_path and template.problem.depends_on_previous_state
         previous = seed
         while len(solutions) < len(jets):
             row = len(solutions)
             start = warm_starts[row] if warm_starts[row] is not None else previous
-            if not shared or not seeds_kernel(start):
+            if not batched or not seeds_kernel(start):
                 previous = self.solve(jets[row], params, previous=previous if along_path else None,
                                       warm_start=start)
                 solutions.append(previous)
@@ -479,23 +493,45 @@ class ShootingModel:
             end = row + 1
             while end < len(jets) and (warm_starts[end] is None or seeds_kernel(warm_starts[end])):
                 end += 1
-            solved = self._solve_run(template, jets[row:end], [start, *warm_starts[row + 1:end]])
+            run = template if packings is None else packings[row:end]
+            solved = self._solve_run(run, jets[row:end], [start, *warm_starts[row + 1:end]],
+                                     previous if carry else None, carry)
             solutions.extend(solved)
             if len(solved) < end - row:
                 # The kernel stopped at this row: the full path, from the same start.
                 failed = len(solutions)
+                before = solutions[-1] if failed > row else previous
                 if failed > row:
-                    start = warm_starts[failed] if warm_starts[failed] is not None else solutions[-1]
-                solutions.append(self.solve(jets[failed], params, warm_start=start))
+                    start = warm_starts[failed] if warm_starts[failed] is not None else before
+                solutions.append(self.solve(jets[failed], params, previous=before if along_path else None,
+                                            warm_start=start))
             previous = solutions[-1]
         return solutions
 
-    def _solve_run(self, template: PreparedProblem, jets: np.ndarray,
-                   warm_starts: Sequence[Solution | None]) -> list[Solution]:
+    def _solve_run(self, packing: PreparedProblem | list[PreparedProblem], jets: np.ndarray,
+                   warm_starts: Sequence[Solution | None], previous: Solution | None = None,
+                   carry_clamp: bool = False) -> list[Solution]:
         """One `kernels.solve_batch` call over rows of jets; the first row must have a warm
-        start. Returns the solutions up to the first row that did not converge."""
+        start. ``packing``: the problem every row shares but for its jets, or each row's
+        own (`_one_kernel_call`). With ``carry_clamp`` each row's clamp starts where the
+        row before left it, the first row's where ``previous`` did (at rest without one).
+        Returns the solutions up to the first row that did not converge."""
         count = len(jets)
-        tips = _tips(template, jets)
+        if isinstance(packing, list):
+            template = packing[0]
+            tips = np.array([row.tip for row in packing])
+            profiles = np.array([row.profile for row in packing])
+            bases = np.array([row.base for row in packing])
+            problems = [row.problem for row in packing]
+        else:
+            template = packing
+            tips = _tips(template, jets)
+            profiles, bases = template.profile[np.newaxis], template.base[np.newaxis]
+            problems = itertools.repeat(template.problem)
+        if carry_clamp:
+            bases = bases.copy()
+            bases[0, kernels.BASE_PREVIOUS_ROTATION:kernels.BASE_PREVIOUS_ROTATION + 3] = (
+                0.0 if previous is None else previous.base_rotation_vector_rad)
         references = np.empty((count, kernels.UNKNOWNS, kernels.UNKNOWNS))
         jacobians = np.empty((count, kernels.UNKNOWNS, kernels.UNKNOWNS))
         seeded = np.zeros(count, dtype=bool)
@@ -510,21 +546,20 @@ class ShootingModel:
         base_wrench = np.empty((count, 6))
         clamp_rotation = np.empty((count, 3))
         info = np.empty((count, 4))
-        solved = kernels.solve_batch(self.kind, self.resolution, references, jacobians, seeded, template.profile,
-                                     tips, template.base, template.beta, self.tolerance, self.max_iterations,
+        solved = kernels.solve_batch(self.kind, self.resolution, references, jacobians, seeded, profiles, tips, bases,
+                                     carry_clamp, template.beta, self.tolerance, self.max_iterations,
                                      template.length_m, template.wrench_scale, nodes_p, nodes_r, base_wrench,
                                      clamp_rotation, info)
-        problem = template.problem
-        arc_length, base_mounting, tip_mounting, offset = (template.node_arc_length_m, problem.base_sensor_mounting,
-                                                           problem.tip_sensor_mounting, problem.base_sensor_offset_m)
+        arc_length = template.node_arc_length_m
         # Iterating over the arrays makes each row's views in C: a diagnosis builds some
         # 100,000 of these, and indexing row by row cost half of that again.
         clamps = clamp_rotation[:solved] if template.compliant_clamp else itertools.repeat(_NO_ROTATION)
-        return [Solution(self.name, jets, arc_length, positions, rotations, wrench, clamp, base_mounting, tip_mounting,
-                         int(status[1]), status[2], jacobian, offset)
-                for jets, positions, rotations, wrench, clamp, status, jacobian in zip(
+        return [Solution(self.name, jets, arc_length, positions, rotations, wrench, clamp, problem.base_sensor_mounting,
+                         problem.tip_sensor_mounting, int(status[1]), status[2], jacobian,
+                         problem.base_sensor_offset_m)
+                for jets, positions, rotations, wrench, clamp, status, jacobian, problem in zip(
                     tips[:solved, kernels.TIP_JETS:kernels.TIP_JETS + 3], nodes_p[:solved], nodes_r[:solved],
-                    base_wrench[:solved], clamps, info[:solved].tolist(), jacobians[:solved])]
+                    base_wrench[:solved], clamps, info[:solved].tolist(), jacobians[:solved], problems)]
 
     def _ramp(self, prepared: PreparedProblem, stages: int,
               work: Workspace) -> tuple[Solution | None, np.ndarray | None]:
@@ -622,6 +657,15 @@ def _floats(values, shape: tuple[int, ...], field_name: str) -> np.ndarray:
             raise ValueError(f"effects left RodProblem.{field_name} with shape {array.shape}, "
                              f"expected {shape}") from None
     return array
+
+
+def _one_kernel_call(packings: Sequence[PreparedProblem]) -> bool:
+    """Whether rows packed apart can still share one `kernels.solve_batch` call: the
+    kernel takes one section law, one length and one set of scales for all of them."""
+    first = packings[0]
+    return all(row.beta == first.beta and row.length_m == first.length_m
+               and row.compliant_clamp == first.compliant_clamp
+               and np.array_equal(row.wrench_scale, first.wrench_scale) for row in packings[1:])
 
 
 def _tips(template: PreparedProblem, jet_forces_n: np.ndarray) -> np.ndarray:

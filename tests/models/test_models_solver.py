@@ -245,6 +245,19 @@ def test_a_batch_of_solves_is_the_loop_of_single_solves_bit_for_bit(model_type):
                      model.solve(jets[2], ACROSS, warm_start=second)])
 
 
+def _count_single_solves(model) -> list:
+    """The jets of every single `solve` the model makes from now on."""
+    single_solves = []
+    solve = model.solve
+
+    def counted(*args, **kwargs):
+        single_solves.append(list(args[0]))
+        return solve(*args, **kwargs)
+
+    model.solve = counted
+    return single_solves
+
+
 @pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=IDS)
 def test_a_row_the_batched_warm_solve_cannot_finish_takes_the_full_path(model_type):
     # With 8 iterations the warm solve cannot jump from jet 1 to a large jet 2 command;
@@ -256,31 +269,86 @@ def test_a_row_the_batched_warm_solve_cannot_finish_takes_the_full_path(model_ty
     for row in jets:
         previous = model.solve(row, ACROSS, warm_start=previous)
         loop.append(previous)
-    single_solves = []
-    solve = model.solve
-
-    def counted(*args, **kwargs):
-        single_solves.append(args[0])
-        return solve(*args, **kwargs)
-
-    model.solve = counted
+    single_solves = _count_single_solves(model)
     _same_solutions(model.solve_batch(jets, ACROSS, [None] * len(jets), seed), loop)
-    assert [list(row) for row in single_solves] == [[0.0, 0.2, 0.05]]
+    assert single_solves == [[0.0, 0.2, 0.05]]
 
 
-def test_a_batch_along_a_path_with_state_carries_each_rows_clamp_state():
-    names = ("base_hysteresis.compliance_rad_per_nm", "base_hysteresis.play_rad")
-    params = with_parameters(ACROSS, dict(zip(names, (50.0, 0.02))))
-    model = CosseratModel(effects=("gravity", "base_hysteresis"))
-    jets = np.array([[f, 0.0, 0.0] for f in (0.0, 0.05, 0.1, 0.05, 0.0)])
+HYSTERESIS = ("base_hysteresis.compliance_rad_per_nm", "base_hysteresis.play_rad")
+
+
+@pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=IDS)
+def test_a_batch_along_a_path_with_state_carries_each_rows_clamp_state(model_type):
+    params = with_parameters(ACROSS, dict(zip(HYSTERESIS, (50.0, 0.02))))
+    model = model_type(effects=("gravity", "base_hysteresis"))
+    jets = np.array([[f, 0.0, 0.0] for f in (0.0, 0.05, 0.1, 0.05, 0.0)] + [[0.0, 0.2, 0.05], [0.0, 0.19, 0.05]])
     loop, previous = [], None
     for row in jets:
         previous = model.solve(row, params, previous=previous)
         loop.append(previous)
+    single_solves = _count_single_solves(model)
     _same_solutions(model.solve_batch(jets, params, [None] * len(jets), along_path=True), loop)
+    # The first row has nothing to start from; the others are one kernel call.
+    assert single_solves == [[0.0, 0.0, 0.0]]
+    # With 12 iterations the warm solve cannot finish some rows (the jump to jet 2
+    # among them), which then take the full path with the state the row before left.
+    short = model_type(effects=("gravity", "base_hysteresis"), max_iterations=12)
+    short_loop, previous = [], None
+    for row in jets:
+        previous = short.solve(row, params, previous=previous)
+        short_loop.append(previous)
+    single_solves = _count_single_solves(short)
+    _same_solutions(short.solve_batch(jets, params, [None] * len(jets), along_path=True), short_loop)
+    assert [0.0, 0.2, 0.05] in single_solves and len(single_solves) < len(jets)
+    # Round the path again from where it ended: the first row's clamp starts there too.
+    again, previous = [], loop[-1]
+    for row in jets[:5]:
+        previous = model.solve(row, params, previous=previous)
+        again.append(previous)
+    _same_solutions(model.solve_batch(jets[:5], params, [None] * 5, loop[-1], along_path=True), again)
     # Without the path every row starts from a clamp at rest, and the loop's way back differs.
-    independent = model.solve_batch(jets, params, [None] * len(jets))
+    independent = model.solve_batch(jets[:5], params, [None] * 5)
     assert np.linalg.norm(independent[3].base_rotation_vector_rad - loop[3].base_rotation_vector_rad) > 1e-4
+
+
+class _SwappedJets:
+    """Reads the jets: jets 1 and 2 swapped (the packed jets are not the commanded ones)."""
+
+    name: ClassVar[str] = "swapped_jets"
+    parameters: ClassVar[tuple] = ()
+    uses_actuation: ClassVar[bool] = True
+
+    def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
+        problem.jet_forces_n = problem.jet_forces_n[[1, 0, 2]]
+
+
+@pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=IDS)
+@pytest.mark.parametrize("effects, values, along_path", [
+    (("gravity", "pressure_stiffening"), {"pressure_stiffening.coefficient_1_n": 3.0}, False),
+    (("gravity", _SwappedJets()), {}, False),
+    (("gravity", "pressure_stiffening", "base_hysteresis"),
+     {"pressure_stiffening.coefficient_1_n": -0.8, **dict(zip(HYSTERESIS, (50.0, 0.02)))}, True),
+], ids=["stiffening", "swapped", "stiffening-on-a-path"])
+def test_rows_packed_apart_are_one_kernel_call_and_the_loop_bit_for_bit(model_type, effects, values, along_path):
+    # An effect that reads the jets packs every command apart, once (row 6 repeats row
+    # 2's); the rows still share one kernel call, and each is its own single solve's answer.
+    params = with_parameters(ACROSS, values)
+    model = model_type(effects=effects)
+    jets = np.random.default_rng(3).uniform(0.0, 0.1, (8, 3))
+    jets[6] = jets[2]
+    seed = model.solve(jets[0] * 0.95, params)
+    warm_starts = [model.solve(jets[4] * 0.97, params) if k == 4 else None for k in range(len(jets))]
+    loop, previous = [], seed
+    for row, start in zip(jets, warm_starts):
+        previous = model.solve(row, params, previous=previous if along_path else None,
+                               warm_start=start if start is not None else previous)
+        loop.append(previous)
+    single_solves = _count_single_solves(model)
+    built = []
+    build_problem = model.build_problem
+    model.build_problem = lambda *args, **kwargs: built.append(1) or build_problem(*args, **kwargs)
+    _same_solutions(model.solve_batch(jets, params, warm_starts, seed, along_path=along_path), loop)
+    assert single_solves == [] and len(built) == 7
 
 
 def test_a_batch_names_its_bad_input():
