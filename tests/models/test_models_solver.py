@@ -351,6 +351,31 @@ def test_rows_packed_apart_are_one_kernel_call_and_the_loop_bit_for_bit(model_ty
     assert single_solves == [] and len(built) == 7
 
 
+class _JetStiffenedSection:
+    """Reads the jets into the section law, which the kernel takes once for all rows."""
+
+    name: ClassVar[str] = "jet_stiffened_section"
+    parameters: ClassVar[tuple] = ()
+    uses_actuation: ClassVar[bool] = True
+
+    def apply(self, problem: RodProblem, values: Mapping[str, float]) -> None:
+        problem.cubic_stiffening_m2 = 1e-3 * float(np.sum(problem.jet_forces_n))
+
+
+@pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=IDS)
+def test_rows_whose_packings_one_kernel_call_cannot_take_are_solved_one_by_one(model_type):
+    model = model_type(effects=("gravity", _JetStiffenedSection()))
+    jets = np.random.default_rng(5).uniform(0.0, 0.1, (4, 3))
+    seed = model.solve(jets[0] * 0.95, ACROSS)
+    loop, previous = [], seed
+    for row in jets:
+        previous = model.solve(row, ACROSS, warm_start=previous)
+        loop.append(previous)
+    single_solves = _count_single_solves(model)
+    _same_solutions(model.solve_batch(jets, ACROSS, [None] * len(jets), seed), loop)
+    assert single_solves == jets.tolist()
+
+
 def test_a_batch_names_its_bad_input():
     with pytest.raises(ValueError, match="jet_forces_n must be"):
         CosseratModel().solve_batch(np.zeros((2, 2)), ACROSS, [None, None])
