@@ -27,10 +27,10 @@ from itertools import groupby
 import numpy as np
 
 from ..data.dataset import Dataset
-from ..geometry import position_error_mm, quat_from_matrix, rotation_angle_deg
+from ..geometry import matrix_from_quat, position_error_mm, quat_from_matrix, rotation_angle_deg
 from ..models.shooting import ShootingModel, Solution, tip_sensors_in_base_sensor
 from ..params import ModelParameters
-from .online import OnlineDisturbanceEstimator, OnlineSettings
+from .online import EstimateStep, OnlineDisturbanceEstimator, OnlineSettings
 
 REF = "ref"
 ONLINE = "online"
@@ -142,21 +142,28 @@ class PathPredictor:
         frame (w, x, y, z), gravity in the base frame then (m/s^2) and, when measured, the
         tip position in the base frame (m). Raises `ConvergenceError` when the model does
         not converge on it."""
+        solution, estimate = self._solve(jet_forces_n, measured_tip_in_base, gravity_in_base_m_s2)
+        positions = (None if measured_tip_position_in_base_m is None
+                     else np.asarray(measured_tip_position_in_base_m, dtype=float)[np.newaxis])
+        measured = np.asarray(measured_tip_in_base)[np.newaxis]
+        ref, = _predictions(REF, [solution], np.array([self.params.disturbance.moment_nm]), measured, positions)
+        if estimate is None:
+            return self._next_record(ref)
+        online, = _predictions(ONLINE, [estimate.solution], estimate.disturbance_moment_nm[np.newaxis], measured,
+                               positions)
+        return self._next_record(ref, online, estimate.error_before_deg, estimate.iterations)
+
+    def _solve(self, jet_forces_n: np.ndarray, measured_tip_in_base: np.ndarray,
+               gravity_in_base_m_s2: np.ndarray) -> tuple[Solution, EstimateStep | None]:
+        """Ref.'s solution of the next step and, with online estimation, the estimator's
+        update on it (``measured_tip_in_base``: a quaternion (w, x, y, z) or a 3x3 rotation)."""
         solution = self.model.solve(jet_forces_n, self._params_under(gravity_in_base_m_s2),
                                     previous=self._previous_ref)
         self._previous_ref = solution
-        positions = (None if measured_tip_position_in_base_m is None
-                     else np.asarray(measured_tip_position_in_base_m, dtype=float)[np.newaxis])
-        ref, = _predictions(REF, [solution], np.array([self.params.disturbance.moment_nm]),
-                            np.asarray(measured_tip_in_base)[np.newaxis], positions)
-        online = before = iterations = None
-        if self._estimator is not None:
-            result = self._estimator.update(jet_forces_n, measured_tip_in_base,
-                                            gravity_in_base_m_s2=gravity_in_base_m_s2)
-            online, = _predictions(ONLINE, [result.solution], result.disturbance_moment_nm[np.newaxis],
-                                   np.asarray(measured_tip_in_base)[np.newaxis], positions)
-            before, iterations = result.error_before_deg, result.iterations
-        return self._next_record(ref, online, before, iterations)
+        if self._estimator is None:
+            return solution, None
+        return solution, self._estimator.update(jet_forces_n, measured_tip_in_base,
+                                                gravity_in_base_m_s2=gravity_in_base_m_s2)
 
     def _params_under(self, gravity_in_base_m_s2: np.ndarray) -> ModelParameters:
         gravity = tuple(gravity_in_base_m_s2)
@@ -179,8 +186,18 @@ class PathPredictor:
         measured = steps.tip_orientation_in_base()
         positions = steps.tip_position_in_base_m()
         if self._estimator is not None:
-            return [self.step(steps.jet_forces_n[row], measured[row], gravity[row],
-                              None if positions is None else positions[row]) for row in range(len(steps))]
+            # The estimate carries from step to step, so the steps are solved in turn; the
+            # predictions are then made from all their solutions at once.
+            rotations = matrix_from_quat(measured)
+            solved = [self._solve(steps.jet_forces_n[row], rotations[row], gravity[row]) for row in range(len(steps))]
+            refs = _predictions(REF, [solution for solution, _ in solved],
+                                np.tile(self.params.disturbance.moment_nm, (len(steps), 1)), measured, positions)
+            estimates = [estimate for _, estimate in solved]
+            onlines = _predictions(ONLINE, [estimate.solution for estimate in estimates],
+                                   np.array([estimate.disturbance_moment_nm for estimate in estimates]), measured,
+                                   positions)
+            return [self._next_record(ref, online, estimate.error_before_deg, estimate.iterations)
+                    for ref, online, estimate in zip(refs, onlines, estimates)]
         # Ref. alone: each run of steps under one gravity is one batch of solves.
         records: list[StepPrediction] = []
         for _, run in groupby(range(len(steps)), key=lambda row: tuple(gravity[row])):

@@ -100,6 +100,17 @@ def test_a_dataset_is_predicted_as_its_steps_one_at_a_time(steps):
         assert (one.error_before_deg, one.iterations) == (offline.error_before_deg, offline.iterations)
 
 
+def test_online_estimation_packs_each_step_once(steps):
+    # Each step has its own gravity (the base sensor's), so each is packed: once, shared
+    # by Ref. and the online estimate (equal parameters reuse the packing).
+    model = CosseratModel()
+    built = []
+    build_problem = model.build_problem
+    model.build_problem = lambda *args, **kwargs: built.append(1) or build_problem(*args, **kwargs)
+    PathPredictor(model, PARAMS, OnlineSettings()).predict(steps)
+    assert len({tuple(row) for row in steps.gravity_in_base_m_s2()}) == len(steps) == len(built)
+
+
 # --- a live session against `compare LOG --online` ------------------------------------
 
 SETTLE_S = 3.0

@@ -128,6 +128,21 @@ def test_cached_packing_follows_parameter_changes():
     assert np.linalg.norm(first.tip_position_in_base_m - again.tip_position_in_base_m) > 1e-3
 
 
+def test_equal_parameters_reuse_the_packing_and_others_do_not():
+    # A path predictor and its online estimator each copy the parameters under the step's
+    # gravity: equal copies share the packing; the slightest change packs anew.
+    from dataclasses import replace
+
+    model = CosseratModel()
+    built = []
+    build_problem = model.build_problem
+    model.build_problem = lambda *args, **kwargs: built.append(1) or build_problem(*args, **kwargs)
+    first = model.prepare([0.05, 0.0, 0.0], ACROSS)
+    assert model.prepare([0.02, 0.0, 0.01], replace(ACROSS)).profile is first.profile and len(built) == 1
+    nudged = replace(ACROSS, gravity_in_base_m_s2=(-9.81, 1e-9, 0.0))
+    assert model.prepare([0.02, 0.0, 0.01], nudged).profile is not first.profile and len(built) == 2
+
+
 def test_bad_jet_forces_and_model_names_are_reported():
     with pytest.raises(ValueError, match="jet_forces_n"):
         CosseratModel().solve([0.1, float("nan"), 0.0], ACROSS)
