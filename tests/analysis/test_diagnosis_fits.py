@@ -243,3 +243,30 @@ def test_the_separating_plan_lies_where_the_tied_models_differ_most(tmp_path):
     assert choose_plan(str(path)) == plan
     with pytest.raises(UserError, match="already exists"):
         write_separating_plan(path, plan, ("gravity", "jet_gain"))
+
+
+def test_a_training_cost_stops_early_only_once_the_point_has_lost(monkeypatch):
+    # The coarse scan's points are costed along the path piece by piece; a point stops as
+    # soon as the pieces so far exceed the cost to beat, and otherwise gets the cost of
+    # the whole path in one piece, bit for bit.
+    calls = []
+    cost = fitting.training_cost
+
+    def recorded(problem, model, params, stop_above=np.inf):
+        result = cost(problem, model, params, stop_above)
+        prefix = np.flatnonzero(problem.split.solved)
+        predictions, positions = fitting.predict_path(model, params, problem.steps.select(prefix),
+                                                      problem.gravity_in_base_m_s2[prefix])
+        rows = fitting.residual_rows(problem, predictions, positions, problem.split.training[prefix])
+        whole = float(np.sum(rows**2) / problem.orientation_sigma_rad**2)
+        assert cost(problem, model, params) == whole
+        calls.append((result, whole, stop_above))
+        return result
+
+    monkeypatch.setattr(fitting, "training_cost", recorded)
+    diagnose(steps_with({"jet_gain.gain_2": 0.9}), "cosserat", candidates=candidates("pressure_stiffening", "jet_gain"),
+             settings=DiagnosisSettings(workers=1))
+    stopped = [(result, whole, bound) for result, whole, bound in calls if result != whole]
+    assert stopped
+    assert all(bound < result <= whole for result, whole, bound in stopped)
+    assert all(result == whole for result, whole, bound in calls if whole <= bound)

@@ -106,6 +106,8 @@ SCAN_AXIS_SHARE = 0.25
 PROFILE_AXIS_SHARES = {1: (0.1, 0.3, 1.0), 2: (0.25, 1.0)}
 PROFILE_MAX_POINTS = 12
 PROFILE_EVALUATIONS = 8
+# `training_cost` predicts the path in this many pieces, to stop once it is lost.
+COST_CHUNKS = 4
 # A base that tilts less than this over a session is clamped (tracker noise is ~0.7 deg
 # per sample, ~0.1 deg per averaged step).
 STATIC_BASE_DEG = 2.0
@@ -204,8 +206,14 @@ def predict_path(model: ShootingModel, params: ModelParameters, steps: Dataset,
     state (`PathPredictor` with the given gravity). Also returns the tip sensor's
     position (N, 3) as read in the measured base frame, m
     (`Solution.tip_sensor_position_in_base_sensor_m`)."""
+    return _predicted(PathPredictor(model, params), steps, gravity_in_base_m_s2)
+
+
+def _predicted(predictor: PathPredictor, steps: Dataset,
+               gravity_in_base_m_s2: np.ndarray) -> tuple[Predictions, np.ndarray]:
+    """`predict_path` by ``predictor``, which continues the path from its last step."""
     offset = np.array(tip_sensor_offset_in_tip_m(steps))
-    path = PathPredictor(model, params).predict(steps, gravity_in_base_m_s2)
+    path = predictor.predict(steps, gravity_in_base_m_s2)
     sensor_positions = tip_sensor_positions_in_base_sensor_m([step.ref.solution for step in path],
                                                              np.tile(offset, (len(path), 1)))
     return Predictions.along(path, REF), sensor_positions
@@ -395,7 +403,7 @@ def scan_starts(problem: Problem, candidate: Effect, baseline: ModelParameters,
     best, best_cost = None, fitted_chi2 - 1.0
     for point in points:
         trial = with_parameters(baseline, {**defaults, **point})
-        cost = training_cost(problem, model, trial)
+        cost = training_cost(problem, model, trial, stop_above=best_cost)
         if cost < best_cost:
             best, best_cost = trial, cost
     return [] if best is None else [best]
@@ -428,7 +436,7 @@ def profile_starts(problem: Problem, candidate: Effect, baseline: ModelParameter
                                fitted=rows)
         except (ConvergenceError, ValueError):
             continue
-        cost = training_cost(problem, model, result.params)
+        cost = training_cost(problem, model, result.params, stop_above=best_cost)
         if cost < best_cost:
             best, best_cost = result.params, cost
     return [] if best is None else [best]
@@ -446,31 +454,44 @@ def split_training_rows(problem: Problem) -> np.ndarray:
     return problem.split.training[problem.split.solved]
 
 
-def training_cost(problem: Problem, model: ShootingModel, params: ModelParameters) -> float:
-    """Training chi^2 of ``params`` along the solved prefix (inf when a solve fails)."""
+def training_cost(problem: Problem, model: ShootingModel, params: ModelParameters,
+                  stop_above: float = np.inf) -> float:
+    """Training chi^2 of ``params`` along the solved prefix (inf when a solve fails).
+
+    The path is predicted in `COST_CHUNKS` pieces. chi^2 only grows along it, so once the
+    pieces so far exceed ``stop_above`` their sum is returned: a lower bound, enough to
+    say that the point loses to ``stop_above`` (most points of a scan do, on the first
+    piece). Otherwise the whole sum, the same as in one piece."""
     prefix = np.flatnonzero(problem.split.solved)
+    predictor = PathPredictor(model, params)
+    pieces, cost = [], 0.0
     try:
-        predictions, positions = predict_path(model, params, problem.steps.select(prefix),
-                                              problem.gravity_in_base_m_s2[prefix])
+        for rows in np.array_split(prefix, min(COST_CHUNKS, len(prefix))):
+            predictions, positions = _predicted(predictor, problem.steps.select(rows),
+                                                problem.gravity_in_base_m_s2[rows])
+            pieces.append(residual_rows(problem, predictions, positions, problem.split.training[rows], rows[0]))
+            cost += float(np.sum(pieces[-1]**2) / problem.orientation_sigma_rad**2)
+            if cost > stop_above:
+                return cost
     except (ConvergenceError, ValueError):
         return float("inf")
-    rows = residual_rows(problem, predictions, positions, problem.split.training[prefix])
-    return float(np.sum(rows**2) / problem.orientation_sigma_rad**2)
+    return float(np.sum(np.vstack(pieces)**2) / problem.orientation_sigma_rad**2)
 
 
 def residual_rows(problem: Problem, predictions: Predictions, sensor_positions_m: np.ndarray,
-                  mask: np.ndarray) -> np.ndarray:
+                  mask: np.ndarray, start: int = 0) -> np.ndarray:
     """(n, 3 or 6) residual rows of the masked steps: orientation rotation vectors (rad),
     then weighted tip sensor position errors when measured (see the module docstring).
-    The predictions may cover a prefix of the session only; ``mask`` then covers it too."""
+    The predictions may cover a stretch of the session only, from step ``start``;
+    ``mask`` then covers it too."""
     steps = problem.steps
-    count = len(mask)
+    stretch = slice(start, start + len(mask))
     rotation = body_rotation_error(matrix_from_quat(predictions.tip_orientation_in_base[mask]),
-                                   matrix_from_quat(steps.tip_orientation_in_base()[:count][mask]))
+                                   matrix_from_quat(steps.tip_orientation_in_base()[stretch][mask]))
     measured = tip_sensor_position_in_base_m(steps)
     if measured is None or problem.position_weight_rad_per_m == 0.0:
         return rotation
-    offset = sensor_positions_m[mask] - measured[:count][mask]
+    offset = sensor_positions_m[mask] - measured[stretch][mask]
     return np.hstack([rotation, problem.position_weight_rad_per_m * offset])
 
 

@@ -79,7 +79,8 @@ def hypotheses(problem: Problem, baseline: Fit) -> tuple[tuple, tuple]:
             others.append(effect)
             continue
         # Along the solved prefix only: the held-out steps after it do not count here.
-        if training_cost(problem, problem.model(effect), problem.initial) < baseline.training_chi2:
+        if training_cost(problem, problem.model(effect), problem.initial,
+                         stop_above=baseline.training_chi2) < baseline.training_chi2:
             discrete.append(effect)
     return tuple(discrete), tuple(others)
 
