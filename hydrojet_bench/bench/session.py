@@ -229,6 +229,8 @@ class Session:
         # Settled steps waiting for their estimate, in plan order (`_estimate_steps`).
         self._to_estimate: asyncio.Queue[tuple[int, Dataset, float]] = asyncio.Queue()
         self._overall_rates: tuple[StreamRateFigure, ...] = ()
+        # The time scale kept over the plan, taken with the rates (`_log_overall_rates`).
+        self._kept_over_plan: float | None = None
         # While the setup checks run: their own recorder and the base accelerometer's
         # readings; samples then are no protocol data and are not logged as such.
         self._check_recorder: StepRecorder | None = None
@@ -279,7 +281,8 @@ class Session:
                 raise
         steps = Dataset.concatenate(self.settled_rows) if self.settled_rows else None
         armed = self._armed
-        kept = self._time_scale_kept()
+        # The figure the log says; an unfinished plan's up to now.
+        kept = self._kept_over_plan if self._kept_over_plan is not None else self._time_scale_kept()
         return SessionResult(request.log_path, completed, len(request.plan), self.clock.now(),
                              time.monotonic() - started, self.params, self.calibration,
                              tuple(self.estimates), steps, self._overall_rates, self.checks,
@@ -561,8 +564,9 @@ class Session:
             if figure.below_warning:
                 self.event("warning", figure.stream, f"below its configured rate: {figure.describe()}")
         self._overall_rates = figures
-        if self._paced is not None and self._paced.held_wall_s > 0.0:
-            self.event("info", "session", f"x{self._time_scale_kept():.1f} kept of x{self._paced.time_scale:g}: "
+        self._kept_over_plan = self._time_scale_kept()
+        if self._paced is not None and self._paced.held_wall_s > 0.0 and self._kept_over_plan is not None:
+            self.event("info", "session", f"x{self._kept_over_plan:.1f} kept of x{self._paced.time_scale:g}: "
                        f"session time waited {self._paced.held_wall_s:.1f} s of wall time for the host, "
                        "so the emulated devices lost no samples to it")
 
