@@ -460,8 +460,8 @@ def training_cost(problem: Problem, model: ShootingModel, params: ModelParameter
 
     The path is predicted in `COST_CHUNKS` pieces. chi^2 only grows along it, so once the
     pieces so far exceed ``stop_above`` their sum is returned: a lower bound, enough to
-    say that the point loses to ``stop_above`` (most points of a scan do, on the first
-    piece). Otherwise the whole sum, the same as in one piece."""
+    say that the point loses to ``stop_above`` (most points of a scan do, well before the
+    path's end). Otherwise the whole sum, the same as in one piece."""
     prefix = np.flatnonzero(problem.split.solved)
     predictor = PathPredictor(model, params)
     pieces, cost = [], 0.0
