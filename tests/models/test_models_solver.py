@@ -239,6 +239,18 @@ def test_a_warm_solve_on_the_last_packing_is_the_packed_problems_solve_bit_for_b
         model.solve([0.05, float("nan"), 0.0], ACROSS, warm_start=seed)
 
 
+def _single_solves(model, jets, params, seed=None, warm_starts=None, along_path=False) -> list:
+    """What `solve_batch` must equal: one `solve` a row, each from its own warm start or
+    else the row before (row 0: ``seed``), which is also its path state ``along_path``."""
+    loop, previous = [], seed
+    for k, row in enumerate(jets):
+        own = None if warm_starts is None else warm_starts[k]
+        previous = model.solve(row, params, previous=previous if along_path else None,
+                               warm_start=own if own is not None else previous)
+        loop.append(previous)
+    return loop
+
+
 @pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=IDS)
 def test_a_batch_of_solves_is_the_loop_of_single_solves_bit_for_bit(model_type):
     model = model_type()
@@ -247,11 +259,8 @@ def test_a_batch_of_solves_is_the_loop_of_single_solves_bit_for_bit(model_type):
     earlier = [model.solve(row * 0.97, ACROSS) for row in jets]
     # Rows 0, 4 and 9 have their own warm start; the others start from the row before.
     warm_starts = [earlier[k] if k in (0, 4, 9) else None for k in range(len(jets))]
-    loop, previous = [], None
-    for row, start in zip(jets, warm_starts):
-        previous = model.solve(row, ACROSS, warm_start=start if start is not None else previous)
-        loop.append(previous)
-    _same_solutions(model.solve_batch(jets, ACROSS, warm_starts), loop)
+    _same_solutions(model.solve_batch(jets, ACROSS, warm_starts), _single_solves(model, jets, ACROSS,
+                                                                                 warm_starts=warm_starts))
     # A seed starts row 0 like any other solution before it would.
     seed = model.solve(jets[0] * 1.05, ACROSS)
     _same_solutions(model.solve_batch(jets[:3], ACROSS, [None] * 3, seed),
@@ -280,10 +289,7 @@ def test_a_row_the_batched_warm_solve_cannot_finish_takes_the_full_path(model_ty
     model = model_type(max_iterations=8)
     jets = np.array([[0.05, 0.0, 0.0], [0.052, 0.0, 0.0], [0.0, 0.2, 0.05], [0.0, 0.21, 0.05]])
     seed = model.solve(jets[0] * 0.9, ACROSS)
-    loop, previous = [], seed
-    for row in jets:
-        previous = model.solve(row, ACROSS, warm_start=previous)
-        loop.append(previous)
+    loop = _single_solves(model, jets, ACROSS, seed)
     single_solves = _count_single_solves(model)
     _same_solutions(model.solve_batch(jets, ACROSS, [None] * len(jets), seed), loop)
     assert single_solves == [[0.0, 0.2, 0.05]]
@@ -297,10 +303,7 @@ def test_a_batch_along_a_path_with_state_carries_each_rows_clamp_state(model_typ
     params = with_parameters(ACROSS, dict(zip(HYSTERESIS, (50.0, 0.02))))
     model = model_type(effects=("gravity", "base_hysteresis"))
     jets = np.array([[f, 0.0, 0.0] for f in (0.0, 0.05, 0.1, 0.05, 0.0)] + [[0.0, 0.2, 0.05], [0.0, 0.19, 0.05]])
-    loop, previous = [], None
-    for row in jets:
-        previous = model.solve(row, params, previous=previous)
-        loop.append(previous)
+    loop = _single_solves(model, jets, params, along_path=True)
     single_solves = _count_single_solves(model)
     _same_solutions(model.solve_batch(jets, params, [None] * len(jets), along_path=True), loop)
     # The first row has nothing to start from; the others are one kernel call.
@@ -308,18 +311,12 @@ def test_a_batch_along_a_path_with_state_carries_each_rows_clamp_state(model_typ
     # With 12 iterations the warm solve cannot finish some rows (the jump to jet 2
     # among them), which then take the full path with the state the row before left.
     short = model_type(effects=("gravity", "base_hysteresis"), max_iterations=12)
-    short_loop, previous = [], None
-    for row in jets:
-        previous = short.solve(row, params, previous=previous)
-        short_loop.append(previous)
+    short_loop = _single_solves(short, jets, params, along_path=True)
     single_solves = _count_single_solves(short)
     _same_solutions(short.solve_batch(jets, params, [None] * len(jets), along_path=True), short_loop)
     assert [0.0, 0.2, 0.05] in single_solves and len(single_solves) < len(jets)
     # Round the path again from where it ended: the first row's clamp starts there too.
-    again, previous = [], loop[-1]
-    for row in jets[:5]:
-        previous = model.solve(row, params, previous=previous)
-        again.append(previous)
+    again = _single_solves(model, jets[:5], params, loop[-1], along_path=True)
     _same_solutions(model.solve_batch(jets[:5], params, [None] * 5, loop[-1], along_path=True), again)
     # Without the path every row starts from a clamp at rest, and the loop's way back differs.
     independent = model.solve_batch(jets[:5], params, [None] * 5)
@@ -353,11 +350,7 @@ def test_rows_packed_apart_are_one_kernel_call_and_the_loop_bit_for_bit(model_ty
     jets[6] = jets[2]
     seed = model.solve(jets[0] * 0.95, params)
     warm_starts = [model.solve(jets[4] * 0.97, params) if k == 4 else None for k in range(len(jets))]
-    loop, previous = [], seed
-    for row, start in zip(jets, warm_starts):
-        previous = model.solve(row, params, previous=previous if along_path else None,
-                               warm_start=start if start is not None else previous)
-        loop.append(previous)
+    loop = _single_solves(model, jets, params, seed, warm_starts, along_path)
     single_solves = _count_single_solves(model)
     built = []
     build_problem = model.build_problem
@@ -382,10 +375,7 @@ def test_rows_whose_packings_one_kernel_call_cannot_take_are_solved_one_by_one(m
     model = model_type(effects=("gravity", _JetStiffenedSection()))
     jets = np.random.default_rng(5).uniform(0.0, 0.1, (4, 3))
     seed = model.solve(jets[0] * 0.95, ACROSS)
-    loop, previous = [], seed
-    for row in jets:
-        previous = model.solve(row, ACROSS, warm_start=previous)
-        loop.append(previous)
+    loop = _single_solves(model, jets, ACROSS, seed)
     single_solves = _count_single_solves(model)
     _same_solutions(model.solve_batch(jets, ACROSS, [None] * len(jets), seed), loop)
     assert single_solves == jets.tolist()
