@@ -184,9 +184,11 @@ class SessionResult:
     # Wall seconds a simulated rig's session time waited for a host too slow for its
     # time scale (`PacedClock`); 0 on the rig.
     held_wall_s: float = 0.0
-    # Session seconds per wall second from the arming of the valves to the end (None if
-    # they were never armed).
+    # Session seconds per wall second from the arming of the valves to the end of the plan
+    # (None if they were never armed), and the wall seconds that is over; `held_wall_s`
+    # is over the same span.
     time_scale_kept: float | None = None
+    kept_wall_s: float = 0.0
 
     def __repr__(self) -> str:
         # Short: Python 3.11's asyncio.run formats its main task, result included, on
@@ -229,8 +231,9 @@ class Session:
         # Settled steps waiting for their estimate, in plan order (`_estimate_steps`).
         self._to_estimate: asyncio.Queue[tuple[int, Dataset, float]] = asyncio.Queue()
         self._overall_rates: tuple[StreamRateFigure, ...] = ()
-        # The time scale kept over the plan, taken with the rates (`_log_overall_rates`).
-        self._kept_over_plan: float | None = None
+        # The time scale kept over the plan, the wall seconds it was kept over and those
+        # session time waited in them, taken together with the rates (`_log_overall_rates`).
+        self._kept_over_plan: tuple[float | None, float, float] | None = None
         # While the setup checks run: their own recorder and the base accelerometer's
         # readings; samples then are no protocol data and are not logged as such.
         self._check_recorder: StepRecorder | None = None
@@ -281,14 +284,14 @@ class Session:
                 raise
         steps = Dataset.concatenate(self.settled_rows) if self.settled_rows else None
         armed = self._armed
-        # The figure the log says; an unfinished plan's up to now.
-        kept = self._kept_over_plan if self._kept_over_plan is not None else self._time_scale_kept()
+        # The figures the log says; an unfinished plan's up to now.
+        kept, kept_wall_s, held_wall_s = self._kept_over_plan or self._kept_so_far()
         return SessionResult(request.log_path, completed, len(request.plan), self.clock.now(),
                              time.monotonic() - started, self.params, self.calibration,
                              tuple(self.estimates), steps, self._overall_rates, self.checks,
                              self.calibration_warnings, None if armed is None else armed[0],
                              None if armed is None else armed[1] - started,
-                             0.0 if self._paced is None else self._paced.held_wall_s, kept)
+                             held_wall_s, kept, kept_wall_s)
 
     def event(self, level: str, source: str, message: str) -> None:
         t_s = self.clock.now()
@@ -564,19 +567,27 @@ class Session:
             if figure.below_warning:
                 self.event("warning", figure.stream, f"below its configured rate: {figure.describe()}")
         self._overall_rates = figures
-        self._kept_over_plan = self._time_scale_kept()
-        if self._paced is not None and self._paced.held_wall_s > 0.0 and self._kept_over_plan is not None:
-            self.event("info", "session", f"x{self._kept_over_plan:.1f} kept of x{self._paced.time_scale:g}: "
-                       f"session time waited {self._paced.held_wall_s:.1f} s of wall time for the host, "
+        self._kept_over_plan = self._kept_so_far()
+        kept, _, held_wall_s = self._kept_over_plan
+        if held_wall_s > 0.0 and kept is not None:
+            self.event("info", "session", f"x{kept:.1f} kept of x{self._paced.time_scale:g}: "
+                       f"session time waited {held_wall_s:.1f} s of wall time for the host, "
                        "so the emulated devices lost no samples to it")
 
     def _time_scale_kept(self) -> float | None:
         """Session seconds per wall second since the valves were armed."""
+        return self._kept_so_far()[0]
+
+    def _kept_so_far(self) -> tuple[float | None, float, float]:
+        """The time scale kept since the valves were armed (None before), the wall seconds
+        since then and the wall seconds session time waited for the host, taken together."""
+        held_wall_s = 0.0 if self._paced is None else self._paced.held_wall_s
         if self._armed is None:
-            return None
+            return None, 0.0, held_wall_s
         armed_session_s, armed_wall_s = self._armed
         wall_s = time.monotonic() - armed_wall_s
-        return (self.clock.now() - armed_session_s) / wall_s if wall_s > 0.0 else None
+        kept = (self.clock.now() - armed_session_s) / wall_s if wall_s > 0.0 else None
+        return kept, wall_s, held_wall_s
 
     # --- the plan -------------------------------------------------------------------
 

@@ -68,6 +68,8 @@ def session_protocol_figures(plan=None) -> dict:
         # seconds session time waited for the host (`PacedClock`).
         "time_scale_kept": kept,
         "held_wall_s": None if result is None else result.held_wall_s,
+        # The wall seconds from the arming to the end of the plan, the span of the two above.
+        "kept_wall_s": None if result is None else result.kept_wall_s,
         "wall_s": wall_s,
         # Of wall_s, what came before the valves were armed (devices, kernels).
         "setup_wall_s": None if result is None else result.armed_wall_s,
