@@ -32,7 +32,7 @@ def test_open_rig_arms_the_valves_last_and_closes_them_on_exit(run_async, failur
     async def check():
         opened = None
         with contextlib.suppress(Unplugged):
-            async with open_rig(profile, settings, ScaledClock(), seed=3, before_arming=before_arming,
+            async with open_rig(profile, settings, ScaledClock(settings.session.time_scale), seed=3, before_arming=before_arming,
                                 on_event=lambda level, source, message: sources.append(source)) as rig:
                 opened = rig
                 assert rig.imus is not None and rig.simulated is not None

@@ -25,7 +25,10 @@ pytestmark = pytest.mark.rig
 @contextlib.asynccontextmanager
 async def rig_under_test(profile_spec: str):
     profile = load_profile(profile_spec)
-    async with open_rig(profile, profile.config, ScaledClock()) as rig:
+    # At the profile's time scale, as a session opens it: 1 on hardware; the simulated
+    # rig's 25 turns its 20 s of IMU gyro-bias sampling (100 samples a chip at 10 Hz)
+    # into 0.8 s.
+    async with open_rig(profile, profile.config, ScaledClock(profile.config.session.time_scale)) as rig:
         yield rig
 
 
