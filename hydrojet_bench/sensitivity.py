@@ -33,7 +33,7 @@ import numpy as np
 
 from .effects import EffectParameter
 from .models import kernels
-from .models.shooting import PreparedProblem, ShootingModel, Solution
+from .models.shooting import PreparedProblem, ShootingModel, Solution, one_kernel_call
 from .params import (DISTURBANCE_NAMES, PARAMETER_SCALES, ModelParameters, get_parameter,
                      with_parameters)
 
@@ -98,20 +98,23 @@ def disturbance_columns(model: ShootingModel, prepared: PreparedProblem, nominal
     return columns / unit, seed
 
 
-def disturbance_columns_batch(model: ShootingModel, jet_forces_n: np.ndarray, params: ModelParameters,
-                              nominals: Sequence[Solution], components: np.ndarray,
-                              steps: np.ndarray) -> tuple[np.ndarray, list[Solution]]:
+def disturbance_columns_batch(model: ShootingModel, jet_forces_n: np.ndarray,
+                              params: ModelParameters | Sequence[ModelParameters], nominals: Sequence[Solution],
+                              components: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, list[Solution]]:
     """`disturbance_columns` at the solutions ``nominals`` of rows of jet forces ((k, 3),
-    N) under ``params``: (k, 6, len(components)) columns and the seeds, in one kernel
-    call when the jets alone change the packed problem (`ShootingModel.shares_packing`),
-    else pose by pose."""
-    template = model.prepare(jet_forces_n[0], params)
-    if not model.shares_packing(template):
-        pairs = [disturbance_columns(model, model.prepare(jets, params), nominal, components, steps)
-                 for jets, nominal in zip(jet_forces_n, nominals)]
+    N) under ``params`` (one set, or one per row): (k, 6, len(components)) columns and the
+    seeds, in one kernel call when the rows' packings can share it
+    (`shooting.one_kernel_call`), else pose by pose. A clamp's path state is taken at
+    rest, as `ShootingModel.prepare` without ``previous`` packs it."""
+    row_params = [params] * len(jet_forces_n) if isinstance(params, ModelParameters) else list(params)
+    packings = model.row_packings(jet_forces_n, row_params)
+    if not one_kernel_call(packings):
+        pairs = [disturbance_columns(model, model.prepare(jets, row), nominal, components, steps)
+                 for jets, row, nominal in zip(jet_forces_n, row_params, nominals)]
         return np.array([columns for columns, _ in pairs]), [seed for _, seed in pairs]
+    template = packings[0]
     unit = np.where(components < 3, template.force_scale_n, template.moment_scale_nm)
-    columns, seeds = model.tip_wrench_columns_batch(template, jet_forces_n, nominals, components, steps / unit)
+    columns, seeds = model.tip_wrench_columns_batch(packings, jet_forces_n, nominals, components, steps / unit)
     return columns / unit, seeds
 
 

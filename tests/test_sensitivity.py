@@ -97,3 +97,13 @@ def test_batched_disturbance_columns_are_each_poses_own_bit_for_bit(model_type, 
         np.testing.assert_array_equal(columns[row], expected)
         np.testing.assert_array_equal(seeds[row].jacobian, seed.jacobian)
         assert seeds[row].positions_in_base_m is nominal.positions_in_base_m
+    # Each pose under its own gravity (a recording's steps): still each pose's own columns.
+    row_params = [dataclasses.replace(params, gravity_in_base_m_s2=(-9.81 * np.cos(a), 9.81 * np.sin(a), 0.0))
+                  for a in np.linspace(0.0, 1.0, len(jets))]
+    nominals = [model.solve(row, row_params[k]) for k, row in enumerate(jets)]
+    columns, seeds = disturbance_columns_batch(model, jets, row_params, nominals, components, steps)
+    for row, nominal in enumerate(nominals):
+        expected, seed = disturbance_columns(model, model.prepare(jets[row], row_params[row]), nominal, components,
+                                             steps)
+        np.testing.assert_array_equal(columns[row], expected)
+        np.testing.assert_array_equal(seeds[row].jacobian, seed.jacobian)

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from itertools import groupby
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -187,21 +186,13 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
             rows[:, 3:] = position_weight_rad_per_m * (positions - measured_positions)
         return rows
 
-    def runs(rows: Sequence[int], params: list[ModelParameters]) -> list[list[int]]:
-        """Positions in ``rows`` cut into runs of poses under one parameter object: each
-        run is one batch of kernel work."""
-        return [list(run) for _, run in groupby(range(len(rows)), key=lambda k: id(params[rows[k]]))]
-
     def solve_poses(rows: Sequence[int], params: list[ModelParameters], warm_starts: Sequence[Solution | None],
                     along_path: bool) -> list[Solution]:
-        """Solve poses ``rows`` in order, each from its warm start or else the pose solved
-        before it, one `solve_batch` per run."""
-        solutions: list[Solution] = []
-        for run in runs(rows, params):
-            solutions.extend(model.solve_batch(
-                jet_forces[[rows[k] for k in run]], params[rows[run[0]]], [warm_starts[k] for k in run],
-                solutions[-1] if solutions else None, along_path=along_path))
-        return solutions
+        """Solve poses ``rows`` in order, each under its own parameters (its gravity) from
+        its warm start or else the pose solved before it, in one `solve_batch`."""
+        rows = list(rows)
+        return model.solve_batch(jet_forces[rows], [params[row] for row in rows], warm_starts, None,
+                                 along_path=along_path)
 
     def evaluate(x: np.ndarray) -> tuple[np.ndarray, list[Solution], list[ModelParameters]]:
         key = x.tobytes()
@@ -241,14 +232,11 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
             # w_d is fitted, so every pose has the same value and the same steps.
             steps = parameter_steps(model, params[0], wanted)
             # No pose here takes its history: along a path with state ``batched`` is empty.
-            by_pose = np.empty((len(fitted_indices), 6, len(batched)))
-            for run in runs(fitted_indices, params):
-                indices = [fitted_indices[k] for k in run]
-                by_pose[run], run_seeds = disturbance_columns_batch(
-                    model, jet_forces[indices], params[indices[0]], [solutions[index] for index in indices],
-                    components, steps)
-                for index, seed in zip(indices, run_seeds):
-                    seeds[index] = seed
+            by_pose, fitted_seeds = disturbance_columns_batch(
+                model, jet_forces[fitted_indices], [params[index] for index in fitted_indices],
+                [solutions[index] for index in fitted_indices], components, steps)
+            for index, seed in zip(fitted_indices, fitted_seeds):
+                seeds[index] = seed
             fitted_solutions = [solutions[index] for index in fitted_indices]
             block = np.empty((len(fitted_indices), rows_per_pose, len(batched)))
             # d(log(R_pred^T R_meas))/dzeta = -(tip sensor mounting)^T S_rot, to first order.

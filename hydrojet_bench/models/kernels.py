@@ -1229,12 +1229,16 @@ def tip_wrench_sensitivity(kind, resolution, reference, profile, tip, base, beta
 
 
 @njit(cache=True, nogil=True)
-def tip_wrench_sensitivity_batch(kind, resolution, references, profile, tips, base, beta, components, steps, length,
+def tip_wrench_sensitivity_batch(kind, resolution, references, profiles, tips, bases, beta, components, steps, length,
                                  jacobians, columns):
-    """`tip_wrench_sensitivity` at k solutions of problems that differ only in their tip
-    loads (``tips``, one row each), in one call; each solution's inputs and outputs are
-    the k-th slices. Stops at the first that fails and returns how many succeeded."""
+    """`tip_wrench_sensitivity` at k solutions of problems that differ in their tip loads
+    (``tips``, one row each) and possibly in their profiles and clamps (``profiles``,
+    ``bases``: one row shared by all, or one row each), in one call; each solution's
+    inputs and outputs are the k-th slices. Stops at the first that fails and returns
+    how many succeeded."""
     for k in range(tips.shape[0]):
+        profile = profiles[0] if profiles.shape[0] == 1 else profiles[k]
+        base = bases[0] if bases.shape[0] == 1 else bases[k]
         if not tip_wrench_sensitivity(kind, resolution, references[k], profile, tips[k], base, beta, components, steps,
                                       length, jacobians[k], columns[k]):
             return k

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import ClassVar
@@ -428,67 +428,69 @@ class ShootingModel:
                                    "at this solution; no sensitivity")
         return columns, nominal.with_jacobian(jacobian)
 
-    def tip_wrench_columns_batch(self, template: PreparedProblem, jet_forces_n: np.ndarray,
+    def tip_wrench_columns_batch(self, packings: Sequence[PreparedProblem], jet_forces_n: np.ndarray,
                                  nominals: Sequence[Solution], components: np.ndarray,
                                  steps: np.ndarray) -> tuple[np.ndarray, list[Solution]]:
-        """`tip_wrench_columns` at the solutions ``nominals`` of ``template`` under rows of
-        other jet forces ((k, 3), N), in one kernel call: (k, 6, len(components)) columns
-        and the seeds. Needs a packing the jets alone change (`shares_packing`)."""
+        """`tip_wrench_columns` at the solutions ``nominals`` of rows of jet forces ((k, 3),
+        N), each row's packing in ``packings`` (`row_packings`), in one kernel call:
+        (k, 6, len(components)) columns and the seeds. The packings must share one kernel
+        call (`one_kernel_call`)."""
         count = len(jet_forces_n)
         jacobians = np.empty((count, kernels.UNKNOWNS, kernels.UNKNOWNS))
         columns = np.empty((count, 6, len(components)))
         references = np.array([nominal.rotations_in_base[-1] for nominal in nominals])
-        if kernels.tip_wrench_sensitivity_batch(self.kind, self.resolution, references, template.profile,
-                                                _tips(template, jet_forces_n), template.base, template.beta,
-                                                components, steps, template.length_m, jacobians, columns) < count:
+        template = packings[0]
+        profiles, tips, bases, _ = _kernel_rows(packings, jet_forces_n)
+        if kernels.tip_wrench_sensitivity_batch(self.kind, self.resolution, references, profiles, tips, bases,
+                                                template.beta, components, steps, template.length_m, jacobians,
+                                                columns) < count:
             raise ConvergenceError(f"{self.name} model: the shooting Jacobian is singular or a shot diverged "
                                    "at one of these solutions; no sensitivity")
         return columns, [nominal.with_jacobian(jacobian) for nominal, jacobian in zip(nominals, jacobians)]
 
-    def solve_batch(self, jet_forces_n: np.ndarray, params: ModelParameters,
+    def solve_batch(self, jet_forces_n: np.ndarray, params: ModelParameters | Sequence[ModelParameters],
                     warm_starts: Sequence[Solution | None], seed: Solution | None = None, *,
                     along_path: bool = False) -> list[Solution]:
-        """Equilibria for rows of jet forces ((k, 3), N) under one set of parameters: row
-        i is ``solve(jet_forces_n[i], params, warm_start=...)`` from ``warm_starts[i]``
+        """Equilibria for rows of jet forces ((k, 3), N) under one set of parameters, or
+        one per row (a recording's steps each under the gravity its base sensor read): row
+        i is ``solve(jet_forces_n[i], params[i], warm_start=...)`` from ``warm_starts[i]``
         or, where that is None, from row i - 1's solution (row 0: ``seed``), bit for
         bit; with ``along_path`` row i - 1's solution (row 0: ``seed``) is also its
         ``previous=`` (path state). The warm solves of a run of rows share one kernel
         call (`kernels.solve_batch`) instead of each paying its own Python set-up, which
-        is most of a warm solve's time in a calibration; so do the rows of a problem
-        whose packing changes with the jets (each row packed in Python) or along the path
-        (the clamp's state carried in the kernel). A row the warm solve does not finish,
-        or with nothing to start from, takes `solve`'s whole path (cold start, ramping);
-        so does every row when the rows' packings differ in more than the kernel takes
-        per row (`_one_kernel_call`)."""
+        is most of a warm solve's time in a calibration; so do the rows whose packings
+        differ (under their own parameters, or an effect that reads the jets: each
+        distinct one packed in Python once) and the rows along the path (the clamp's
+        state carried in the kernel). A row the warm solve does not finish, or with
+        nothing to start from, takes `solve`'s whole path (cold start, ramping); so does
+        every row when the rows' packings differ in more than the kernel takes per row
+        (`one_kernel_call`)."""
         jets = np.asarray(jet_forces_n, dtype=float)
         if jets.ndim != 2 or jets.shape[1] != 3 or len(warm_starts) != len(jets):
             raise ValueError(f"jet_forces_n must be (k, 3) with one warm start per row, got shape {jets.shape} "
                              f"and {len(warm_starts)} warm starts")
+        row_params = [params] * len(jets) if isinstance(params, ModelParameters) else list(params)
+        if len(row_params) != len(jets):
+            raise ValueError(f"{len(row_params)} parameter sets for {len(jets)} rows of jet forces")
         if not np.all(np.isfinite(jets)):
             raise ValueError("jet_forces_n must be finite")
         solutions: list[Solution] = []
         if not len(jets):
             return solutions
-        template = self.prepare(jets[0], params)
-        # A packing that changes with the jets is made in Python (effects are Python) for
-        # each command, once (a sweep passes each command on its way up and down, and
-        # repeats); the kernel still solves the rows in one call. Path state is carried in
-        # the kernel from row to row.
         packings = None
-        if self._uses_actuation:
-            by_command = {jets[0].tobytes(): template}
-            for row in jets[1:]:
-                if row.tobytes() not in by_command:
-                    by_command[row.tobytes()] = self.prepare(row, params)
-            packings = [by_command[row.tobytes()] for row in jets]
-        batched = packings is None or _one_kernel_call(packings)
+        if self._uses_actuation or any(row is not row_params[0] for row in row_params):
+            packings = self.row_packings(jets, row_params)
+            template = packings[0]
+        else:
+            template = self.prepare(jets[0], row_params[0])
+        batched = packings is None or one_kernel_call(packings)
         carry = along_path and template.problem.depends_on_previous_state
         previous = seed
         while len(solutions) < len(jets):
             row = len(solutions)
             start = warm_starts[row] if warm_starts[row] is not None else previous
             if not batched or not seeds_kernel(start):
-                previous = self.solve(jets[row], params, previous=previous if along_path else None,
+                previous = self.solve(jets[row], row_params[row], previous=previous if along_path else None,
                                       warm_start=start)
                 solutions.append(previous)
                 continue
@@ -506,31 +508,39 @@ class ShootingModel:
                 before = solutions[-1] if failed > row else previous
                 if failed > row:
                     start = warm_starts[failed] if warm_starts[failed] is not None else before
-                solutions.append(self.solve(jets[failed], params, previous=before if along_path else None,
-                                            warm_start=start))
+                solutions.append(self.solve(jets[failed], row_params[failed],
+                                            previous=before if along_path else None, warm_start=start))
             previous = solutions[-1]
         return solutions
+
+    def row_packings(self, jets: np.ndarray, row_params: Sequence[ModelParameters]) -> list[PreparedProblem]:
+        """Each row's packing for rows of jet forces ((k, 3), N) under their parameters,
+        built once per parameters object and, if an effect reads the jets, per command (a
+        sweep passes each command on its way up and down, and repeats); other rows under
+        the same parameters share its profile and clamp, with their own jets."""
+        made: dict[tuple[int, bytes], PreparedProblem] = {}
+        packings = []
+        for row, params in zip(jets, row_params):
+            key = (id(params), row.tobytes() if self._uses_actuation else b"")
+            if key not in made:
+                made[key] = self.prepare(row, params)
+            elif not self._uses_actuation:
+                packings.append(made[key].with_jets(row))
+                continue
+            packings.append(made[key])
+        return packings
 
     def _solve_run(self, packing: PreparedProblem | list[PreparedProblem], jets: np.ndarray,
                    warm_starts: Sequence[Solution | None], previous: Solution | None = None,
                    carry_clamp: bool = False) -> list[Solution]:
         """One `kernels.solve_batch` call over rows of jets; the first row must have a warm
         start. ``packing``: the problem every row shares but for its jets, or each row's
-        own (`_one_kernel_call`). With ``carry_clamp`` each row's clamp starts where the
-        row before left it, the first row's where ``previous`` did (at rest without one).
-        Returns the solutions up to the first row that did not converge."""
+        own (`row_packings`, `one_kernel_call`). With ``carry_clamp`` each row's clamp
+        starts where the row before left it, the first row's where ``previous`` did (at
+        rest without one). Returns the solutions up to the first row that did not converge."""
         count = len(jets)
-        if isinstance(packing, list):
-            template = packing[0]
-            tips = np.array([row.tip for row in packing])
-            profiles = np.array([row.profile for row in packing])
-            bases = np.array([row.base for row in packing])
-            problems = [row.problem for row in packing]
-        else:
-            template = packing
-            tips = _tips(template, jets)
-            profiles, bases = template.profile[np.newaxis], template.base[np.newaxis]
-            problems = itertools.repeat(template.problem)
+        template = packing[0] if isinstance(packing, list) else packing
+        profiles, tips, bases, problems = _kernel_rows(packing, jets)
         if carry_clamp:
             bases = bases.copy()
             bases[0, kernels.BASE_PREVIOUS_ROTATION:kernels.BASE_PREVIOUS_ROTATION + 3] = (
@@ -662,7 +672,23 @@ def _floats(values, shape: tuple[int, ...], field_name: str) -> np.ndarray:
     return array
 
 
-def _one_kernel_call(packings: Sequence[PreparedProblem]) -> bool:
+def _kernel_rows(packing: PreparedProblem | Sequence[PreparedProblem],
+                 jet_forces_n: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, Iterable[RodProblem]]:
+    """The kernel's inputs for rows of jet forces ((k, 3), N): profiles and clamps (one row
+    when all rows share them, uncopied), tip loads and each row's problem. ``packing``:
+    one problem all rows share but for their jets, or each row's own (`row_packings`)."""
+    if isinstance(packing, PreparedProblem):
+        return (packing.profile[np.newaxis], _tips(packing, jet_forces_n), packing.base[np.newaxis],
+                itertools.repeat(packing.problem))
+    first = packing[0]
+    profiles = (first.profile[np.newaxis] if all(row.profile is first.profile for row in packing)
+                else np.array([row.profile for row in packing]))
+    bases = (first.base[np.newaxis] if all(row.base is first.base for row in packing)
+             else np.array([row.base for row in packing]))
+    return profiles, np.array([row.tip for row in packing]), bases, [row.problem for row in packing]
+
+
+def one_kernel_call(packings: Sequence[PreparedProblem]) -> bool:
     """Whether rows packed apart can still share one `kernels.solve_batch` call: the
     kernel takes one section law, one length and one set of scales for all of them."""
     first = packings[0]

@@ -188,7 +188,8 @@ class FoldingCosserat(CosseratModel):
         return super().solve(jet_forces_n, params, previous=previous, warm_start=warm_start)
 
     def solve_batch(self, jet_forces_n, params, warm_starts, seed=None, *, along_path=False):
-        self._refuse_in_band(params)
+        for row in [params] if isinstance(params, ModelParameters) else params:
+            self._refuse_in_band(row)
         return super().solve_batch(jet_forces_n, params, warm_starts, seed, along_path=along_path)
 
 

@@ -4,6 +4,7 @@ PRB chain against the paper's eq. 16 written with explicit Jacobians."""
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import ClassVar
 
 import numpy as np
@@ -240,12 +241,14 @@ def test_a_warm_solve_on_the_last_packing_is_the_packed_problems_solve_bit_for_b
 
 
 def _single_solves(model, jets, params, seed=None, warm_starts=None, along_path=False) -> list:
-    """What `solve_batch` must equal: one `solve` a row, each from its own warm start or
-    else the row before (row 0: ``seed``), which is also its path state ``along_path``."""
+    """What `solve_batch` must equal: one `solve` a row (under ``params``, or row k under
+    ``params[k]``), each from its own warm start or else the row before (row 0:
+    ``seed``), which is also its path state ``along_path``."""
     loop, previous = [], seed
     for k, row in enumerate(jets):
         own = None if warm_starts is None else warm_starts[k]
-        previous = model.solve(row, params, previous=previous if along_path else None,
+        previous = model.solve(row, params if isinstance(params, ModelParameters) else params[k],
+                               previous=previous if along_path else None,
                                warm_start=own if own is not None else previous)
         loop.append(previous)
     return loop
@@ -357,6 +360,37 @@ def test_rows_packed_apart_are_one_kernel_call_and_the_loop_bit_for_bit(model_ty
     model.build_problem = lambda *args, **kwargs: built.append(1) or build_problem(*args, **kwargs)
     _same_solutions(model.solve_batch(jets, params, warm_starts, seed, along_path=along_path), loop)
     assert single_solves == [] and len(built) == 7
+
+
+@pytest.mark.parametrize("model_type", [CosseratModel, PrbModel], ids=IDS)
+@pytest.mark.parametrize("effects, values, along_path", [
+    (("gravity",), {}, False),
+    (("gravity", "pressure_stiffening"), {"pressure_stiffening.coefficient_1_n": 3.0}, False),
+    (("gravity", "base_hysteresis"), dict(zip(HYSTERESIS, (50.0, 0.02))), True),
+], ids=["gravity", "stiffening", "hysteresis-on-a-path"])
+def test_rows_under_their_own_parameters_are_one_kernel_call_and_the_loop_bit_for_bit(model_type, effects, values,
+                                                                                       along_path):
+    # A recording's steps, each under the gravity its base sensor read (rows 3 and 4
+    # share one parameters object): each is packed once, all are solved in one kernel
+    # call, and each is its own single solve's answer.
+    model = model_type(effects=effects)
+    rng = np.random.default_rng(5)
+    jets = rng.uniform(0.0, 0.1, (8, 3))
+    tilts = [with_parameters(ACROSS, values)]
+    for _ in range(6):
+        tilts.append(replace(tilts[0], gravity_in_base_m_s2=tuple(9.81 * so3_exp(rng.normal(0.0, 0.3, 3))[:, 0])))
+    row_params = tilts[:4] + tilts[3:]
+    seed = model.solve(jets[0] * 0.95, row_params[0])
+    loop = _single_solves(model, jets, row_params, seed, along_path=along_path)
+    single_solves = _count_single_solves(model)
+    built = []
+    build_problem = model.build_problem
+    model.build_problem = lambda *args, **kwargs: built.append(1) or build_problem(*args, **kwargs)
+    _same_solutions(model.solve_batch(jets, row_params, [None] * len(jets), seed, along_path=along_path), loop)
+    packings_made = len(jets) if model.effects[-1].uses_actuation else len(tilts)
+    assert single_solves == [] and len(built) == packings_made
+    with pytest.raises(ValueError, match="7 parameter sets for 8 rows"):
+        model.solve_batch(jets, row_params[1:], [None] * len(jets), seed)
 
 
 class _JetStiffenedSection:
