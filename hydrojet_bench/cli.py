@@ -14,6 +14,7 @@ import argparse
 import importlib
 import os
 import sys
+from pathlib import Path
 
 from rich.console import Console
 from rich.markup import escape
@@ -21,6 +22,7 @@ from rich.markup import escape
 from . import __version__
 from .commands import render
 from .errors import ConvergenceError, UserError
+from .files import check_writable_target
 
 # Order is the order shown in --help.
 COMMAND_MODULES = ("run", "replay", "sensors", "simulate", "calibrate", "compare", "diagnose", "study", "batch",
@@ -65,6 +67,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        json_path = getattr(args, "json", None)
+        if isinstance(json_path, Path) and str(json_path) != render.STDOUT:
+            # Said now, not after the minutes of work whose figures it would hold.
+            check_writable_target(json_path, "JSON figures", overwrite=True)
         return int(args.func(args) or 0)
     except UserError as error:
         _print_error(str(error))

@@ -54,7 +54,9 @@ def test_user_mistakes_are_one_line_without_traceback(tmp_path):
          "--position-weight must be from 0 to 10000 rad per m"),
         (["run", "--plan", "hold:1e300", "--log", str(tmp_path / "h.mcap")],
          "plan 'hold:1e300': hold:SECONDS takes a number of seconds > 0 and at most 86400 (one day)"),
-        (["perf", "--runs", "200", "--no-session", "--json", str(tmp_path / "missing" / "out.json")], "cannot write"),
+        # Refused before the figures are computed (a whole perf run), naming the folder.
+        (["perf", "--runs", "200", "--no-session", "--json", str(tmp_path / "missing" / "out.json")],
+         f"cannot write the JSON figures: its folder {tmp_path / 'missing'} does not exist"),
     ):
         result = run_cli(*args)
         assert result.returncode == 2, args

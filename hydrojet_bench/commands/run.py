@@ -91,7 +91,8 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
                             f"are wall time) and at most {MAX_TIME_SCALE:g} (the simulated rig cannot keep up "
                             f"beyond), got {args.time_scale}")
         if not settings.transports.simulated and args.time_scale != 1.0:
-            raise UserError("--time-scale applies to the simulated rig only; this profile drives real devices")
+            raise UserError(f"--time-scale applies to the simulated rig only; {profile.source} drives real devices "
+                            "([transports])")
         settings = msgspec.structs.replace(settings, session=msgspec.structs.replace(settings.session,
                                                                                      time_scale=args.time_scale))
     limits = tuple(table.max_force_n for table in settings.valve_calibrations())
