@@ -63,7 +63,11 @@ def test_sigkill_of_the_bench_closes_the_valves_and_leaves_a_recoverable_log(tmp
         profile = tmp_path / "external-valves.toml"
         sim = (PROFILES_DIR / "sim.toml").read_text()
         assert 'valves = "sim"' in sim
-        profile.write_text(sim.replace('valves = "sim"', f'valves = "pty://{pty_path}"'))
+        # No gyro-bias sampling at start-up: at x1 it holds the bench 20 s (100 samples a
+        # chip at 10 Hz) before the valves are armed, and the IMUs are not under test.
+        assert "\n[imu]\n" in sim
+        profile.write_text(sim.replace('valves = "sim"', f'valves = "pty://{pty_path}"')
+                           .replace("\n[imu]\n", "\n[imu]\ngyro_bias_samples = 0\n"))
         plan = tmp_path / "hold.toml"
         plan.write_text("[[step]]\nq1 = 0.06\nq2 = 0.0\nq3 = 0.0\nsettle_s = 120.0\n")
         log_path = tmp_path / "killed.mcap"

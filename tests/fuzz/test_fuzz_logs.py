@@ -136,7 +136,9 @@ COMMANDS = {
     "calibrate": lambda v, out, r: ["calibrate", str(v.path), "-o", str(out / "params.toml")],
     "compare": lambda v, out, r: ["compare", str(v.path), "--params", str(r.params), "--json", str(out / "out.json")],
     "sensors": lambda v, out, r: ["sensors", str(v.path), "--json", str(out / "out.json")],
-    "diagnose": lambda v, out, r: ["diagnose", str(v.path), "--workers", "1", "--json", str(out / "out.json")],
+    # One candidate: the log's damage reaches a diagnosis through its steps, whatever it fits.
+    "diagnose": lambda v, out, r: ["diagnose", str(v.path), "--workers", "1", "--candidate", "jet_gain", "--json",
+                                   str(out / "out.json")],
 }
 
 
