@@ -28,17 +28,17 @@ def printed_commands(output: str) -> list[list[str]]:
             if line.strip().startswith("hydrojet-bench ")]
 
 
-def run_all_printed(first: list[str], capsys, outputs: dict[str, list[str]] | None = None) -> list[list[str]]:
+def run_all_printed(first: list[str], capsys, json_of: tuple[str, ...] = ()) -> list[list[str]]:
     """Run ``first`` and every command printed by it or by those it leads to; returns
-    every command run, in order. ``outputs``: options added to the commands of a name as
-    they run (an output file: what they print is the same)."""
+    every command run, in order. The commands named in ``json_of`` also write their
+    JSON, to ``<name>-<k>.json`` for the k-th command run (what they print is the same)."""
     pending, done = [first], []
     while pending:
         argv = pending.pop(0)
         if argv in done:
             continue
         capsys.readouterr()
-        code = main([*argv, *(outputs or {}).get(argv[0], [])])
+        code = main([*argv, *(["--json", f"{argv[0]}-{len(done)}.json"] if argv[0] in json_of else [])])
         captured = capsys.readouterr()
         assert code == 0, (argv, captured.err)
         done.append(argv)
@@ -51,9 +51,9 @@ def test_every_printed_next_command_runs_as_printed(tmp_path, monkeypatch, capsy
     (tmp_path / "effects").mkdir()
     shutil.copy(EXAMPLE, tmp_path / "effects" / "clogged_jet.py")
     effect = "effects/clogged_jet.py:CloggedJet"
-    # diagnose runs once (a diagnosis takes most of this test), its JSON written on the way.
+    # Each command runs once (a diagnosis takes most of this test), its JSON written on the way.
     ran = run_all_printed(["simulate", "-o", "data.csv", "--hidden", effect, "--seed", "2"], capsys,
-                          {"diagnose": ["--json", "diagnosis.json"]})
+                          ("diagnose", "compare"))
     names = [argv[0] for argv in ran]
     assert names[:2] == ["simulate", "diagnose"]
     # diagnose names an effect: both calibrations of the add step, the compare, and the
@@ -63,10 +63,9 @@ def test_every_printed_next_command_runs_as_printed(tmp_path, monkeypatch, capsy
 
     # The add step shows what diagnose said it would: the figures diagnose computed for
     # the printed compare are the ones that compare prints.
-    preview = json.loads((tmp_path / "diagnosis.json").read_text())["add_step"]
-    compared = next(argv for argv in ran if argv[0] == "compare" and "--baseline" in argv)
-    assert main([*compared, "--json", "compare.json"]) == 0
-    shown = json.loads((tmp_path / "compare.json").read_text())
+    preview = json.loads((tmp_path / "diagnose-1.json").read_text())["add_step"]
+    compared = next(k for k, argv in enumerate(ran) if argv[0] == "compare" and "--baseline" in argv)
+    shown = json.loads((tmp_path / f"compare-{compared}.json").read_text())
     assert shown["baseline"]["as_diagnosed"]["orientation_rmse_deg"] == pytest.approx(preview["compare_before_deg"],
                                                                                       rel=1e-6)
     assert shown["as_diagnosed"]["orientation_rmse_deg"] == pytest.approx(preview["compare_after_deg"], rel=1e-6)
