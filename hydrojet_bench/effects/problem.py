@@ -20,10 +20,28 @@ work unchanged in both the Cosserat and the PRB model:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
-from ..params import ModelParameters, actuation_matrix
+from ..params import ModelParameters, RodParameters, actuation_matrix
+
+
+_IDENTITY = np.eye(3)
+
+
+@lru_cache(maxsize=64)
+def _section_stiffness(rod: RodParameters, arc_length_bytes: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """Bending (E I) and torsional (G J) stiffness, N m^2, at the arc lengths (m) packed in
+    ``arc_length_bytes``; shared and read-only. Every step of a recording is packed under
+    its own gravity with the same rod, and these cost more than the rest of the nominal
+    problem."""
+    arc_length_m = np.frombuffer(arc_length_bytes)
+    bending = np.asarray(rod.youngs_modulus_pa(arc_length_m), dtype=float) * rod.second_moment_m4
+    torsion = np.asarray(rod.shear_modulus_pa(arc_length_m), dtype=float) * rod.polar_moment_m4
+    bending.flags.writeable = False
+    torsion.flags.writeable = False
+    return bending, torsion
 
 
 # slots: an effect assigning a misspelt attribute (problem.jet_gain = ...) gets an
@@ -65,8 +83,8 @@ class RodProblem:
     # only swaps this in (`ShootingModel.prepare`).
     previous_base_rotation_vector_rad: np.ndarray = field(default_factory=lambda: np.zeros(3))
     # Measurement: sensor orientation = body orientation @ mounting rotation.
-    base_sensor_mounting: np.ndarray = field(default_factory=lambda: np.eye(3))
-    tip_sensor_mounting: np.ndarray = field(default_factory=lambda: np.eye(3))
+    base_sensor_mounting: np.ndarray = field(default_factory=lambda: _IDENTITY.copy())
+    tip_sensor_mounting: np.ndarray = field(default_factory=lambda: _IDENTITY.copy())
     # The base sensor's origin in the clamp frame (m): the point a base_sensor_mounting
     # turns the sensor about, so the clamp origin read from the sensor moves with it.
     base_sensor_offset_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -83,18 +101,16 @@ class RodProblem:
                 arc_length_m: np.ndarray) -> "RodProblem":
         """The paper's model with no effect applied: linear E, isotropic section, jets and
         w_d at the tip, rigid clamp, sensors aligned with the body frames."""
-        rod = params.rod
-        youngs = np.asarray(rod.youngs_modulus_pa(arc_length_m), dtype=float)
-        bending = youngs * rod.second_moment_m4
-        torsion = np.asarray(rod.shear_modulus_pa(arc_length_m), dtype=float) * rod.polar_moment_m4
+        bending, torsion = _section_stiffness(params.rod, np.asarray(arc_length_m, dtype=float).tobytes())
         samples = len(arc_length_m)
         return cls(
             params=params,
             jet_forces_n=np.asarray(jet_forces_n, dtype=float),
             arc_length_m=arc_length_m,
-            bending_stiffness_x_nm2=bending,
+            # Copies: an effect may edit them in place.
+            bending_stiffness_x_nm2=bending.copy(),
             bending_stiffness_y_nm2=bending.copy(),
-            torsional_stiffness_nm2=torsion,
+            torsional_stiffness_nm2=torsion.copy(),
             intrinsic_curvature_in_body_1_m=np.zeros((samples, 3)),
             jet_ring_angle_rad=params.jets.ring_angle_rad,
             tip_follower_force_in_tip_n=np.array(params.disturbance.force_n, dtype=float),
@@ -106,7 +122,10 @@ class RodProblem:
         frame (e.g. the capsule's centre of mass)."""
         force = np.asarray(force_in_base_n, dtype=float)
         self.tip_dead_force_in_base_n = self.tip_dead_force_in_base_n + force
-        self.tip_dead_force_arm_m_n = self.tip_dead_force_arm_m_n + np.outer(point_in_tip_m, force)
+        # The outer product (np.outer's own operation, without its checks: every packing
+        # under a weight makes one).
+        point = np.asarray(point_in_tip_m, dtype=float)
+        self.tip_dead_force_arm_m_n = self.tip_dead_force_arm_m_n + point[:, np.newaxis] * force[np.newaxis, :]
 
     def actuation_matrix(self) -> np.ndarray:
         """Effective 3x3 map from commanded jet forces (N) to the tip-frame follower force."""

@@ -235,3 +235,29 @@ def test_measurement_hook_rotates_the_sensor_not_the_body(model_type):
     np.testing.assert_allclose(measured.positions_in_base_m, plain.positions_in_base_m, atol=1e-12)
     np.testing.assert_allclose(measured.tip_sensor_in_base_sensor(), plain.tip_sensor_in_base_sensor() @ mounting,
                                atol=1e-12)
+
+
+class _DoublesStiffnessInPlace:
+    """Edits the problem's arrays in place, as the interface allows."""
+
+    name = "doubles_stiffness_in_place"
+    parameters = ()
+    uses_actuation = False
+
+    def apply(self, problem, values):
+        problem.bending_stiffness_x_nm2 *= 2.0
+        problem.tip_sensor_mounting[:] = so3_exp(np.array([0.0, 0.0, 0.1]))
+
+
+def test_an_effect_editing_arrays_in_place_changes_its_own_problem_only():
+    # The nominal stiffness is shared between problems of one rod (a recording's steps are
+    # each packed under their own gravity): an in-place edit must not reach the next one.
+    model = CosseratModel(effects=(_DoublesStiffnessInPlace(),))
+    params = ModelParameters()
+    plain = CosseratModel().build_problem(np.zeros(3), params)
+    for _ in range(3):
+        problem = model.build_problem(np.zeros(3), params)
+        np.testing.assert_array_equal(problem.bending_stiffness_x_nm2, 2.0 * plain.bending_stiffness_x_nm2)
+        np.testing.assert_array_equal(problem.bending_stiffness_y_nm2, plain.bending_stiffness_y_nm2)
+        np.testing.assert_array_equal(problem.tip_sensor_mounting, so3_exp(np.array([0.0, 0.0, 0.1])))
+    np.testing.assert_array_equal(CosseratModel().build_problem(np.zeros(3), params).tip_sensor_mounting, np.eye(3))
