@@ -107,14 +107,14 @@ def disturbance_columns_batch(model: ShootingModel, jet_forces_n: np.ndarray,
     (`shooting.one_kernel_call`), else pose by pose. A clamp's path state is taken at
     rest, as `ShootingModel.prepare` without ``previous`` packs it."""
     row_params = [params] * len(jet_forces_n) if isinstance(params, ModelParameters) else list(params)
-    packings = model.row_packings(jet_forces_n, row_params)
-    if not one_kernel_call(packings):
+    packing = model.kernel_packing(jet_forces_n, row_params)
+    if isinstance(packing, list) and not one_kernel_call(packing):
         pairs = [disturbance_columns(model, model.prepare(jets, row), nominal, components, steps)
                  for jets, row, nominal in zip(jet_forces_n, row_params, nominals)]
         return np.array([columns for columns, _ in pairs]), [seed for _, seed in pairs]
-    template = packings[0]
+    template = packing[0] if isinstance(packing, list) else packing
     unit = np.where(components < 3, template.force_scale_n, template.moment_scale_nm)
-    columns, seeds = model.tip_wrench_columns_batch(packings, jet_forces_n, nominals, components, steps / unit)
+    columns, seeds = model.tip_wrench_columns_batch(packing, jet_forces_n, nominals, components, steps / unit)
     return columns / unit, seeds
 
 

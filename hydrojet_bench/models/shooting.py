@@ -428,19 +428,19 @@ class ShootingModel:
                                    "at this solution; no sensitivity")
         return columns, nominal.with_jacobian(jacobian)
 
-    def tip_wrench_columns_batch(self, packings: Sequence[PreparedProblem], jet_forces_n: np.ndarray,
+    def tip_wrench_columns_batch(self, packing: PreparedProblem | list[PreparedProblem], jet_forces_n: np.ndarray,
                                  nominals: Sequence[Solution], components: np.ndarray,
                                  steps: np.ndarray) -> tuple[np.ndarray, list[Solution]]:
         """`tip_wrench_columns` at the solutions ``nominals`` of rows of jet forces ((k, 3),
-        N), each row's packing in ``packings`` (`row_packings`), in one kernel call:
-        (k, 6, len(components)) columns and the seeds. The packings must share one kernel
+        N) packed as ``packing`` (`kernel_packing`), in one kernel call: (k, 6,
+        len(components)) columns and the seeds. Rows packed apart must share one kernel
         call (`one_kernel_call`)."""
         count = len(jet_forces_n)
         jacobians = np.empty((count, kernels.UNKNOWNS, kernels.UNKNOWNS))
         columns = np.empty((count, 6, len(components)))
         references = np.array([nominal.rotations_in_base[-1] for nominal in nominals])
-        template = packings[0]
-        profiles, tips, bases, _ = _kernel_rows(packings, jet_forces_n)
+        template = packing[0] if isinstance(packing, list) else packing
+        profiles, tips, bases, _ = _kernel_rows(packing, jet_forces_n)
         if kernels.tip_wrench_sensitivity_batch(self.kind, self.resolution, references, profiles, tips, bases,
                                                 template.beta, components, steps, template.length_m, jacobians,
                                                 columns) < count:
@@ -477,12 +477,9 @@ class ShootingModel:
         solutions: list[Solution] = []
         if not len(jets):
             return solutions
-        packings = None
-        if self._uses_actuation or any(row is not row_params[0] for row in row_params):
-            packings = self.row_packings(jets, row_params)
-            template = packings[0]
-        else:
-            template = self.prepare(jets[0], row_params[0])
+        packing = self.kernel_packing(jets, row_params)
+        packings = packing if isinstance(packing, list) else None
+        template = packing[0] if isinstance(packing, list) else packing
         batched = packings is None or one_kernel_call(packings)
         carry = along_path and template.problem.depends_on_previous_state
         previous = seed
@@ -512,6 +509,15 @@ class ShootingModel:
                                             previous=before if along_path else None, warm_start=start))
             previous = solutions[-1]
         return solutions
+
+    def kernel_packing(self, jets: np.ndarray,
+                       row_params: Sequence[ModelParameters]) -> PreparedProblem | list[PreparedProblem]:
+        """The packing a kernel call over rows of jet forces ((k, 3), N) under their
+        parameters takes: one that every row shares but for its jets (one parameters
+        object, no effect reads the jets), else each row's own (`row_packings`)."""
+        if self._uses_actuation or any(row is not row_params[0] for row in row_params):
+            return self.row_packings(jets, row_params)
+        return self.prepare(jets[0], row_params[0])
 
     def row_packings(self, jets: np.ndarray, row_params: Sequence[ModelParameters]) -> list[PreparedProblem]:
         """Each row's packing for rows of jet forces ((k, 3), N) under their parameters,
