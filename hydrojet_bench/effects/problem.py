@@ -124,7 +124,7 @@ class RodProblem:
         self.tip_dead_force_in_base_n = self.tip_dead_force_in_base_n + force
         # The outer product (np.outer's own operation, without its checks: every packing
         # under a weight makes one).
-        point = np.asarray(point_in_tip_m, dtype=float)
+        point = np.asarray(point_in_tip_m, dtype=float).ravel()
         self.tip_dead_force_arm_m_n = self.tip_dead_force_arm_m_n + point[:, np.newaxis] * force[np.newaxis, :]
 
     def actuation_matrix(self) -> np.ndarray:
