@@ -33,7 +33,8 @@ import numpy as np
 
 from .effects import EffectParameter
 from .models import kernels
-from .models.shooting import PreparedProblem, ShootingModel, Solution, one_kernel_call
+from .models.shooting import (PreparedProblem, ShootingModel, Solution, one_kernel_call, parameters_per_row,
+                              template_of)
 from .params import (DISTURBANCE_NAMES, PARAMETER_SCALES, ModelParameters, get_parameter,
                      with_parameters)
 
@@ -106,13 +107,13 @@ def disturbance_columns_batch(model: ShootingModel, jet_forces_n: np.ndarray,
     seeds, in one kernel call when the rows' packings can share it
     (`shooting.one_kernel_call`), else pose by pose. A clamp's path state is taken at
     rest, as `ShootingModel.prepare` without ``previous`` packs it."""
-    row_params = [params] * len(jet_forces_n) if isinstance(params, ModelParameters) else list(params)
+    row_params = parameters_per_row(params, len(jet_forces_n))
     packing = model.kernel_packing(jet_forces_n, row_params)
     if isinstance(packing, list) and not one_kernel_call(packing):
         pairs = [disturbance_columns(model, model.prepare(jets, row), nominal, components, steps)
                  for jets, row, nominal in zip(jet_forces_n, row_params, nominals)]
         return np.array([columns for columns, _ in pairs]), [seed for _, seed in pairs]
-    template = packing[0] if isinstance(packing, list) else packing
+    template = template_of(packing)
     unit = np.where(components < 3, template.force_scale_n, template.moment_scale_nm)
     columns, seeds = model.tip_wrench_columns_batch(packing, jet_forces_n, nominals, components, steps / unit)
     return columns / unit, seeds

@@ -439,7 +439,7 @@ class ShootingModel:
         jacobians = np.empty((count, kernels.UNKNOWNS, kernels.UNKNOWNS))
         columns = np.empty((count, 6, len(components)))
         references = np.array([nominal.rotations_in_base[-1] for nominal in nominals])
-        template = packing[0] if isinstance(packing, list) else packing
+        template = template_of(packing)
         profiles, tips, bases, _ = _kernel_rows(packing, jet_forces_n)
         if kernels.tip_wrench_sensitivity_batch(self.kind, self.resolution, references, profiles, tips, bases,
                                                 template.beta, components, steps, template.length_m, jacobians,
@@ -469,7 +469,7 @@ class ShootingModel:
         if jets.ndim != 2 or jets.shape[1] != 3 or len(warm_starts) != len(jets):
             raise ValueError(f"jet_forces_n must be (k, 3) with one warm start per row, got shape {jets.shape} "
                              f"and {len(warm_starts)} warm starts")
-        row_params = [params] * len(jets) if isinstance(params, ModelParameters) else list(params)
+        row_params = parameters_per_row(params, len(jets))
         if len(row_params) != len(jets):
             raise ValueError(f"{len(row_params)} parameter sets for {len(jets)} rows of jet forces")
         if not np.all(np.isfinite(jets)):
@@ -479,7 +479,7 @@ class ShootingModel:
             return solutions
         packing = self.kernel_packing(jets, row_params)
         packings = packing if isinstance(packing, list) else None
-        template = packing[0] if isinstance(packing, list) else packing
+        template = template_of(packing)
         batched = packings is None or one_kernel_call(packings)
         carry = along_path and template.problem.depends_on_previous_state
         previous = seed
@@ -545,7 +545,7 @@ class ShootingModel:
         starts where the row before left it, the first row's where ``previous`` did (at
         rest without one). Returns the solutions up to the first row that did not converge."""
         count = len(jets)
-        template = packing[0] if isinstance(packing, list) else packing
+        template = template_of(packing)
         profiles, tips, bases, problems = _kernel_rows(packing, jets)
         if carry_clamp:
             bases = bases.copy()
@@ -692,6 +692,17 @@ def _kernel_rows(packing: PreparedProblem | Sequence[PreparedProblem],
     bases = (first.base[np.newaxis] if all(row.base is first.base for row in packing)
              else np.array([row.base for row in packing]))
     return profiles, np.array([row.tip for row in packing]), bases, [row.problem for row in packing]
+
+
+def parameters_per_row(params: ModelParameters | Sequence[ModelParameters], rows: int) -> list[ModelParameters]:
+    """One parameter set for each of ``rows`` rows: ``params`` repeated, or as given."""
+    return [params] * rows if isinstance(params, ModelParameters) else list(params)
+
+
+def template_of(packing: PreparedProblem | Sequence[PreparedProblem]) -> PreparedProblem:
+    """The packing whose section law, length and scales a kernel call over rows packed as
+    ``packing`` (`ShootingModel.kernel_packing`) takes for all of them."""
+    return packing if isinstance(packing, PreparedProblem) else packing[0]
 
 
 def one_kernel_call(packings: Sequence[PreparedProblem]) -> bool:
