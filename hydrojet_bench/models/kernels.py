@@ -851,7 +851,7 @@ def _norm3(v):
 
 
 @njit(cache=True, nogil=True)
-def _solve3(a, b, out):
+def solve3(a, b, out):
     """Cramer's rule on a 3x3 system; returns False when (nearly) singular."""
     c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
     c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
@@ -978,7 +978,7 @@ def solve(kind, resolution, reference, jacobian, have_jacobian, profile, tip, ba
         iterations += 1
         accepted = False
         new_norm = norm
-        if _solve3(jacobian, r, step):
+        if solve3(jacobian, r, step):
             alpha = 1.0
             for _ in range(10):
                 for k in range(3):
@@ -1213,7 +1213,7 @@ def tip_wrench_sensitivity(kind, resolution, reference, profile, tip, base, beta
     for column in range(count):
         for i in range(3):
             residual[i] = -partials[i, 3 + column]
-        if not _solve3(jacobian, residual, rotation_rate):
+        if not solve3(jacobian, residual, rotation_rate):
             return False
         for i in range(3):
             moved[i] = -(partials[3 + i, 3 + column] + partials[3 + i, 0] * rotation_rate[0]

@@ -145,3 +145,52 @@ def test_a_measurement_of_the_wrong_shape_is_refused():
     estimator = OnlineDisturbanceEstimator(CosseratModel(), PARAMS)
     with pytest.raises(ValueError, match=r"3x3 rotation or a quaternion .* shape \(3,\)"):
         estimator.update([0.05, 0.0, 0.0], [1.0, 0.0, 0.0])
+
+
+def _damped_least_squares_by_lapack(matrix, omega, damping, gain):
+    gram = matrix @ matrix.T
+    mu = damping * np.linalg.eigvalsh(gram)[-1]
+    return gain * (matrix.T @ np.linalg.solve(gram + mu * np.eye(3), omega))
+
+
+@pytest.mark.parametrize("case", ["random", "rank_two", "rank_one", "equal_eigenvalues", "diagonal", "tiny", "huge"])
+def test_the_closed_form_damped_least_squares_is_lapacks(case):
+    # The update's eq. 4 solves its 3x3 system in closed form (the largest eigenvalue of
+    # S S^T by the trigonometric formula): it must agree with LAPACK for any S the
+    # sensitivity can give, including rank-deficient and degenerate ones.
+    from hydrojet_bench.estimation.online import _damped_least_squares, _largest_eigenvalue_symmetric3
+
+    rng = np.random.default_rng(["random", "rank_two", "rank_one", "equal_eigenvalues", "diagonal", "tiny",
+                                 "huge"].index(case))
+    for _ in range(200):
+        matrix = rng.normal(size=(3, 3))
+        if case == "rank_two":
+            matrix[2] = rng.normal() * matrix[0] + rng.normal() * matrix[1]
+        elif case == "rank_one":
+            matrix = np.outer(rng.normal(size=3), rng.normal(size=3))
+        elif case == "equal_eigenvalues":
+            rotation, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+            matrix = rng.uniform(0.1, 10.0) * rotation
+        elif case == "diagonal":
+            matrix = np.diag(rng.normal(size=3))
+        elif case == "tiny":
+            matrix *= 1e-9
+        elif case == "huge":
+            matrix *= 1e6
+        omega = rng.normal(size=3)
+        gram = matrix @ matrix.T
+        largest = np.linalg.eigvalsh(gram)[-1]
+        assert _largest_eigenvalue_symmetric3(gram) == pytest.approx(largest, rel=1e-10)
+        for damping in (1e-3, 0.3):
+            change = np.empty(3)
+            _damped_least_squares(matrix, omega, damping, 0.4, change)
+            expected = _damped_least_squares_by_lapack(matrix, omega, damping, 0.4)
+            np.testing.assert_allclose(change, expected, rtol=1e-7, atol=1e-9 * np.abs(expected).max())
+
+
+def test_damped_least_squares_with_no_sensitivity_changes_nothing():
+    from hydrojet_bench.estimation.online import _damped_least_squares
+
+    change = np.full(3, np.nan)
+    _damped_least_squares(np.zeros((3, 3)), np.array([0.01, -0.02, 0.0]), 1e-3, 0.4, change)
+    np.testing.assert_array_equal(change, np.zeros(3))
