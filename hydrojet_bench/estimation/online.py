@@ -182,9 +182,11 @@ def _largest_eigenvalue_symmetric3(a):
     mean = (a[0, 0] + a[1, 1] + a[2, 2]) / 3.0
     b00, b11, b22 = a[0, 0] - mean, a[1, 1] - mean, a[2, 2] - mean
     spread = math.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * off) / 6.0)
-    # det((A - mean I) / spread) / 2 is the cosine of three times the angle.
-    half_det = (b00 * (b11 * b22 - a[1, 2] * a[1, 2]) - a[0, 1] * (a[0, 1] * b22 - a[1, 2] * a[0, 2])
-                + a[0, 2] * (a[0, 1] * a[1, 2] - b11 * a[0, 2])) / (2.0 * spread * spread * spread)
+    # B = (A - mean I) / spread has entries of order one; det(B) / 2 is the cosine of
+    # three times the angle.
+    b00, b11, b22 = b00 / spread, b11 / spread, b22 / spread
+    b01, b02, b12 = a[0, 1] / spread, a[0, 2] / spread, a[1, 2] / spread
+    half_det = 0.5 * (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02))
     angle = math.acos(min(1.0, max(-1.0, half_det))) / 3.0
     return mean + 2.0 * spread * math.cos(angle)
 
