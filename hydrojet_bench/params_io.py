@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import msgspec
 import numpy as np
@@ -40,7 +40,7 @@ if TYPE_CHECKING:
 class ParameterFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
     """A parameter file, as the module docstring lays it out."""
 
-    model: str
+    model: Literal["cosserat", "prb"]
     effects: tuple[str, ...] = ()
     parameters: dict[str, Finite]
     standard_errors: dict[str, Finite] = {}
@@ -171,4 +171,6 @@ def calibration_parameter_file(model: str, effects: Sequence[str], fit: Calibrat
                      "poses": int(np.sum(rows & (steps.sweep == -1))),
                      "sweep_steps": int(np.sum(rows & (steps.sweep >= 0))),
                      "rms_orientation_deg_before": round(fit.rms_orientation_deg_before, 4),
-                     "rms_orientation_deg_after": round(fit.rms_orientation_deg_after, 4)})
+                     "rms_orientation_deg_after": round(fit.rms_orientation_deg_after, 4),
+                     "converged": fit.converged, "convergence": fit.convergence,
+                     **({"at_bound": list(fit.at_bound)} if fit.at_bound else {})})

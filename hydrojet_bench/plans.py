@@ -163,6 +163,17 @@ class Plan:
         return Plan(tuple(steps)), tuple(changed)
 
 
+def clipped_warning(clipped: tuple[int, ...], limits: tuple[float, ...]) -> str:
+    """What `Plan.clipped` changed, in words ("" for nothing): the steps (1-based) and
+    the valves' limits (N per jet)."""
+    if not clipped:
+        return ""
+    shown = ", ".join(str(index + 1) for index in clipped[:5]) + (", ..." if len(clipped) > 5 else "")
+    return (f"{len(clipped)} step(s) of the plan ({shown}) ask more than the valves give "
+            f"({', '.join(f'{limit:g}' for limit in limits)} N per jet): they are played, logged and predicted "
+            "at the clipped force")
+
+
 def _resultant_to_jets(resultant_xy_n: np.ndarray) -> np.ndarray:
     """Non-negative jet forces whose resultant (eq. 5, ring angle 0) is the given tip-frame
     force: the two jets flanking the force's direction share it, the third stays off.
@@ -338,5 +349,5 @@ def plan_from_rows(rows: list[dict[str, object]], source: str, default_settle_s:
 
 
 __all__ = ["CALIBRATION_SWEEP", "DEFAULT_MAX_FORCE_N", "DEFAULT_SETTLE_S", "LABEL_LIMIT", "MAX_SETTLE_S",
-           "PAPER_CALIBRATION_POSES", "Plan", "PlanStep", "calibration_plan", "hold_plan", "imu_versus_em_plan",
-           "paper_protocol", "plan_from_rows", "validation_sweeps"]
+           "PAPER_CALIBRATION_POSES", "Plan", "PlanStep", "calibration_plan", "clipped_warning", "hold_plan",
+           "imu_versus_em_plan", "paper_protocol", "plan_from_rows", "validation_sweeps"]

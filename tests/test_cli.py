@@ -196,3 +196,17 @@ def test_table_titles_show_file_names_as_written():
     console = Console(record=True, width=100)
     console.print(render.table("cosserat calibrated on 40 poses of [bold]x[/x].csv", labels=("a",), numbers=("b",)))
     assert "posesof[bold]x[/x].csv" in "".join(console.export_text().split())  # the title wraps to the table
+
+
+def test_simulate_plays_the_paper_protocol_within_the_profiles_valves(tmp_path, capsys):
+    from hydrojet_bench.data.csv_io import read_csv
+    from hydrojet_bench.profile import load_profile
+
+    profile = tmp_path / "weak.toml"
+    profile.write_text('extends = "sim"\n[jets]\nmax_force_n = 0.05\n')
+    table = tmp_path / "weak.csv"
+    assert main(["simulate", "--profile", str(profile), "-o", str(table)]) == 0
+    err = " ".join(capsys.readouterr().err.split())
+    assert "ask more than the valves give (0.05, 0.05, 0.05 N per jet)" in err
+    assert f"({profile}: [jets] max_force_n)" in err
+    assert read_csv(table, load_profile(profile)).jet_forces_n.max() == pytest.approx(0.05)

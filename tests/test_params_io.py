@@ -36,6 +36,7 @@ def test_a_written_file_reads_back(tmp_path: Path) -> None:
     ('model = "cosserat"\n[parameters]\nE0 = nan\n', "parameters.E0 must be a finite number, got nan"),
     ('model = "cosserat"\neffects = "gravity"\n[parameters]\nE0 = 1.0\n', "effects must be a list of strings"),
     ('model = "cosserat"\n[parameter]\nE0 = 1.0\n', "parameter is not a known key; did you mean parameters?"),
+    ('model = "foo"\n[parameters]\nE0 = 1.0\n', "model must be one of 'cosserat', 'prb', got 'foo'"),
 ])
 def test_mistakes_name_file_and_key(tmp_path: Path, text: str, message: str) -> None:
     path = tmp_path / "p.toml"
@@ -118,7 +119,8 @@ def test_a_standard_error_the_fit_could_not_bound_is_listed_as_undetermined(tmp_
 
     fit = SimpleNamespace(names=tuple(NOMINAL), values=np.array(list(NOMINAL.values())),
                           standard_errors=np.array([np.inf] + [1e-3] * (len(NOMINAL) - 1)),
-                          rms_orientation_deg_before=2.0, rms_orientation_deg_after=1.0)
+                          rms_orientation_deg_before=2.0, rms_orientation_deg_after=1.0, converged=True,
+                          convergence="converged: as stated", at_bound=())
     steps = SimpleNamespace(sweep=np.array([-1, -1, 0]))
     content = calibration_parameter_file("cosserat", ["gravity"], fit, Path("run.csv"), load_profile("sim"),
                                          "calibration", steps, np.array([True, True, False]))

@@ -20,8 +20,8 @@ from ..errors import UserError
 from ..files import make_folder_for
 from ..effects import CALIBRATION_POSES, SWEEPS, identifying_rows
 from ..estimation.calibration import (ALL_ROWS, DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_dataset,
-                                      fit_mask, rows_that_identify)
-from ..estimation.setup_warnings import calibration_warnings
+                                      fit_mask, parameter_bounds, rows_that_identify)
+from ..estimation.setup_warnings import BOUND_CHECKED, calibration_warnings
 from ..model_choice import COSSERAT, ModelChoice, model_choice
 from ..params_io import calibration_parameter_file, effect_specs, write_parameter_file
 from . import render
@@ -34,6 +34,8 @@ from .log_notice import warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_
 # residuals overflow before the weight is absurd enough to be noticed (1e308 gave "array
 # must not contain infs or NaNs" about the data file).
 MAX_POSITION_WEIGHT_RAD_PER_M = 1e4
+# Exit code of a calibration whose values are not to be trusted (see the warnings).
+UNTRUSTED = 3
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -49,6 +51,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="rows to fit: the calibration poses (sweep -1), the sweeps, or all (default: the "
                              "poses, and all when an --effect is identified only by sweeps)")
     render.add_json_argument(parser, "the parameter file's content, the unidentifiable pairs and the evaluations")
+    render.add_exit_codes(parser, {UNTRUSTED: "the fit did not converge or a fitted value sits on a bound (the "
+                                              "parameter file is written and says so; the warnings say which)"})
     parser.set_defaults(func=run)
 
 
@@ -83,6 +87,15 @@ def run(args: argparse.Namespace) -> int:
     console.print(table)
     console.print(f"RMS orientation error on the {_FITTED_ROWS[fit_on]}: {result.rms_orientation_deg_before:.2f} deg "
                   f"before, {result.rms_orientation_deg_after:.2f} deg after ({result.evaluations} evaluations)")
+    if not result.converged:
+        console.print(f"[yellow]warning:[/] the fit is {result.convergence}: these values are not an optimum; "
+                      "check the profile's starting values, or diagnose the data")
+    for name, value in zip(result.names, result.values):
+        if name in result.at_bound and name not in BOUND_CHECKED:
+            lower, upper = parameter_bounds(model, name)
+            console.print(f"[yellow]warning:[/] {name} = {value:.6g} sits on its bound ({lower:g} to {upper:g}): "
+                          "the data push it past what it may take, so the model misses something it was made to "
+                          "absorb; diagnose looks for it")
     for warning in calibration_warnings(model, result):
         console.print(f"[yellow]warning:[/] {render.plain(warning)}")
     for first, second, correlation in result.unidentifiable:
@@ -103,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
                                     "single_sample_steps": single_sample_steps})
     compare = command("compare", *input_words(args), "--params", args.output, "--online")
     print_next(console, "see how it predicts the sweeps with", [compare])
-    return 0
+    return 0 if result.converged and not result.at_bound else UNTRUSTED
 
 
 _FITTED_ROWS = {CALIBRATION_POSES: "calibration poses", SWEEPS: "sweep steps", ALL_ROWS: "calibration poses and sweeps"}

@@ -21,7 +21,7 @@ import numpy as np
 from rich.console import Console
 from rich.panel import Panel
 
-from ..analysis.diagnosis import NONE, UNEXPLAINED, Diagnosis, DiagnosisSettings, diagnose
+from ..analysis.diagnosis import NONE, UNDECIDED, UNEXPLAINED, Diagnosis, DiagnosisSettings, diagnose
 from ..analysis.diagnosis.engine import DEFAULT_DEPTH, FoundEffect, default_candidates
 from ..analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
 from ..analysis.diagnosis.fitting import scored_as_diagnosed
@@ -43,6 +43,9 @@ from .common import add_input_arguments, add_model_arguments, comparison_steps, 
 from .figure_options import add_format_argument
 from .log_notice import warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_unsettled
 from .next_steps import command, effect_words, input_words, print_next
+
+# Exit code of a diagnosis whose fits could not decide (`UNDECIDED`).
+UNDECIDED_EXIT = 3
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -69,6 +72,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="for a setup verdict, write the rig profile with the corrected key (a new file)")
     parser.epilog = ("--effect names effects known to be present: they join the baseline (gravity at its nominal "
                      "weight, E0, EL, L, w_d) and are calibrated with it. Every --candidate is then tried on top.")
+    render.add_exit_codes(parser, {UNDECIDED_EXIT: "the verdict is undecided: the fits did not converge (the verdict "
+                                                   "says which)"})
     parser.set_defaults(func=run)
 
 
@@ -121,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
     elif tied is not None:
         console.print(f"No command within the jets' range makes {', '.join(_tied(tied))} differ by more than "
                       "the noise floor: they are equivalent on this rig, so no separating plan is written.")
-    return 0
+    return UNDECIDED_EXIT if diagnosis.verdict == UNDECIDED else 0
 
 
 def _tied(diagnosis: Diagnosis) -> tuple[str, ...]:
@@ -209,8 +214,8 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
         title, style = f"verdict (setup): {diagnosis.verdict}", "magenta"
     elif diagnosis.verdict == NONE:
         title, style = "verdict: none", "green"
-    elif diagnosis.verdict == UNEXPLAINED:
-        title, style = "verdict: unexplained", "yellow"
+    elif diagnosis.verdict in (UNEXPLAINED, UNDECIDED):
+        title, style = f"verdict: {diagnosis.verdict}", "yellow"
     else:
         title, style = "verdict: " + " + ".join(found.effect for found in diagnosis.found), "green"
     lines = [diagnosis.explanation, "", "Evidence: " + "; ".join(evidence) + "."]
@@ -356,6 +361,10 @@ def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Name
         calibrate = command("calibrate", *data, *known, "-o", "p.toml")
         if diagnosis.verdict == NONE:
             print_next(console, "the model is complete for these data; calibrate it with", [calibrate])
+            return
+        if diagnosis.verdict == UNDECIDED:
+            print_next(console, "see how far a calibration gets from the profile's values with", [
+                calibrate, command("compare", *data, "--params", "p.toml", "--report", "report")])
             return
         print_next(console, "see where it fails with", [
             calibrate, command("compare", *data, "--params", "p.toml", "--online", "--report", "report"),

@@ -27,6 +27,7 @@ from ..config.schema import MAX_TIME_SCALE, MIN_TIME_SCALE
 from ..errors import UserError
 from ..files import check_writable_target, create_numbered, make_folder_for
 from ..model_choice import ModelDefaults, model_choice
+from ..plans import clipped_warning
 from ..profile import load_profile
 from . import render
 from .common import add_model_arguments, check_seed
@@ -97,7 +98,7 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
                                                                                      time_scale=args.time_scale))
     limits = tuple(table.max_force_n for table in settings.valve_calibrations())
     plan, clipped = choose_plan(args.plan, settle_s=settings.session.settle_s).clipped(limits)
-    clipped_warning = _clipped_warning(clipped, limits)
+    clip_warning = clipped_warning(clipped, limits)
     choice = model_choice(args, ModelDefaults(settings.estimator.model, tuple(settings.estimator.effects),
                                               origin=f"{profile.source} (estimator.effects)"))
     model, requested = choice.model, choice.requested
@@ -116,7 +117,7 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
     request = SessionRequest(profile=profile, settings=settings, plan=plan, log_path=log_path, model=model,
                              effects=choice.effect_specs, params=choice.parameters(profile.model_parameters()),
                              calibrate=not args.no_calibration, calibration_names=choice.calibration_names,
-                             seed=args.seed, warnings=(clipped_warning,) if clipped_warning else (),
+                             seed=args.seed, warnings=(clip_warning,) if clip_warning else (),
                              command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]), overwrite_log=overwrite,
                              setup_checks=not args.skip_checks)
     console = render.console_for(args)
@@ -126,8 +127,8 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
                   f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.session.time_scale:g}, "
                   f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; "
                   f"log {render.plain(log_path)}", highlight=False)
-    if clipped_warning:
-        progress.print(f"[yellow]warning:[/] {clipped_warning}")
+    if clip_warning:
+        progress.print(f"[yellow]warning:[/] {clip_warning}")
     if server is not None:
         progress.print(f"Foxglove: open a connection to {server.url} (layout: docs/foxglove/hydrojet.json)",
                        highlight=False, markup=False)
@@ -140,15 +141,6 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
         return 143
     _print_outcome(console, result, model.name, args)
     return 0
-
-
-def _clipped_warning(clipped: tuple[int, ...], limits: tuple[float, ...]) -> str:
-    if not clipped:
-        return ""
-    shown = ", ".join(str(index + 1) for index in clipped[:5]) + (", ..." if len(clipped) > 5 else "")
-    return (f"{len(clipped)} step(s) of the plan ({shown}) ask more than the valves give "
-            f"({', '.join(f'{limit:g}' for limit in limits)} N per jet): they are played, logged and predicted "
-            "at the clipped force")
 
 
 def _foxglove(address: str | None) -> contextlib.AbstractContextManager:

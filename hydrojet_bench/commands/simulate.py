@@ -14,7 +14,7 @@ from pathlib import Path
 from ..data.csv_io import write_csv
 from ..errors import UserError
 from ..files import check_writable_target, make_folder_for, publish
-from ..plans import paper_protocol
+from ..plans import clipped_warning, paper_protocol
 from ..profile import load_profile
 from ..twin import SETUP_ERRORS, DigitalTwin, SetupErrors, TwinConfig, parse_setup_error
 from ..twin.hidden import HIDDEN, inert_effects, parse_hidden
@@ -72,11 +72,17 @@ def run(args: argparse.Namespace) -> int:
                         f"(its identity) and would hide nothing; give it a size, e.g. --hidden {effect.name}=VALUE "
                         f"or {effect.name}:PARAMETER=VALUE")
     twin = DigitalTwin(config)
-    recording = twin.run_plan(paper_protocol())
+    # The profile's valves give what they can, as on the rig (`run`).
+    limits = tuple(table.max_force_n for table in profile.config.valve_calibrations())
+    plan, clipped = paper_protocol().clipped(limits)
+    recording = twin.run_plan(plan)
     dataset = recording.to_dataset(profile, f"twin seed {config.seed}")
     rows = publish(args.output, "recording", lambda partial: write_csv(dataset, partial), overwrite=args.overwrite)
     hidden_names = ", ".join([effect.name for effect in hidden] + setup_specs) or "none"
     console = render.console()
+    if clipped:
+        render.console(stderr=True).print(f"warning: {clipped_warning(clipped, limits)} ({profile.source}: "
+                                          "[jets] max_force_n)", markup=False)
     console.print(f"wrote {rows} samples (229 steps: 40 calibration poses, 9 sweeps) to {args.output}; "
                   f"hidden effects: {hidden_names}", markup=False)
     # A CSV file is read with the "sim" profile unless told otherwise.

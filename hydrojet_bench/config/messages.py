@@ -23,6 +23,7 @@ _PATH = re.compile(r"^(?P<message>.*?)(?: - at `\$(?P<path>[^`]*)`)?$", re.DOTAL
 _EXPECTED = re.compile(r"^Expected `")
 _MISSING = re.compile(r"^Object missing required field `(?P<field>[^`]+)`$")
 _UNKNOWN = re.compile(r"^Object contains unknown field `(?P<field>[^`]+)`$")
+_ENUM = re.compile(r"^Invalid enum value ")
 _BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
 _LARGEST_FLOAT = sys.float_info.max
 _SCALAR_WORDS = {float: "a number", int: "an integer", str: "a string", bool: "true or false"}
@@ -61,7 +62,7 @@ def explain(error: str, document: Mapping[str, Any], schema: type) -> str:
         return f"{_join(dotted, found['field'])} is required"
     if found := _UNKNOWN.match(message):
         return f"{_join(dotted, found['field'])} is not a known key{_suggestion(found['field'], schema, parts)}"
-    if _EXPECTED.match(message):
+    if _EXPECTED.match(message) or _ENUM.match(message):
         expected = _phrase(_annotation_at(schema, parts))
         return f"{dotted or 'the file'} must be {expected}, got {_describe(_value_at(document, parts))}"
     # A check in a table's __post_init__: its message starts with the field's name.
@@ -209,6 +210,8 @@ def _phrase(annotation: Any) -> str:
         return " ".join([words, " and ".join(bounds)]).strip()
     if origin in (typing.Union, types.UnionType):
         return " or ".join(_phrase(a) for a in arguments if a is not type(None))
+    if origin is typing.Literal:
+        return "one of " + ", ".join(repr(argument) for argument in arguments)
     if origin is tuple:
         item = _phrase(arguments[0]).removeprefix("a ").removeprefix("an ")
         item = item.replace("number", "numbers").replace("string", "strings").replace("list ", "lists ")

@@ -58,6 +58,16 @@ CORE_BOUNDS: dict[str, tuple[float, float]] = {
     "wd_mx": (-0.1, 0.1), "wd_my": (-0.1, 0.1), "wd_mz": (-0.1, 0.1),
 }
 CORRELATION_WARNING = 0.99
+# Converged: the projected gradient of chi^2 per parameter scale is at most this, chi^2
+# taking the residual variance (or the noise variance, when known and larger) as the
+# noise: a Newton step would then gain less than 0.25 in chi^2.
+GRADIENT_TOLERANCE = 1.0
+# The least noise that judgement assumes: data a model fits to within a hundredth of a
+# degree (no sensor here resolves that) leave no noise to measure the gradient against.
+NEGLIGIBLE_RESIDUAL_RAD = np.radians(1e-2)
+# A fitted value within this share of its bounds' span (of their logarithms, for bounds
+# three or more decades apart) from a bound sits on it.
+BOUND_SHARE = 1e-3
 DEFAULT_POSITION_WEIGHT_RAD_PER_M = 10.0
 
 
@@ -85,7 +95,11 @@ class CalibrationResult:
     rms_orientation_deg: RMS relative angle over the poses before and after.
     scaled_gradient_norm: largest component of the projected gradient of the cost
     (half the sum of squared residuals) per parameter scale (`parameter_scale`) at the
-    result: zero at an optimum, bounds respected. stop_reason: why the fit stopped."""
+    result: zero at an optimum, bounds respected. stop_reason: why the fit stopped.
+    relative_gradient: the same gradient of chi^2 (the residual variance, or
+    ``variance_floor`` if larger, as the noise); converged: it is at most
+    `GRADIENT_TOLERANCE`. at_bound: fitted parameters that sit on a bound other than their
+    no-effect default (`BOUND_SHARE`): the data push them past the range they may take."""
 
     params: ModelParameters
     names: tuple[str, ...]
@@ -98,6 +112,16 @@ class CalibrationResult:
     evaluations: int
     scaled_gradient_norm: float = float("nan")
     stop_reason: str = ""
+    relative_gradient: float = float("nan")
+    converged: bool = False
+    at_bound: tuple[str, ...] = ()
+
+    @property
+    def convergence(self) -> str:
+        """Whether the fit converged and why, in words."""
+        verdict = "converged" if self.converged else "NOT converged"
+        return (f"{verdict}: {self.stop_reason} after {self.evaluations} evaluations, scaled gradient "
+                f"{self.relative_gradient:.2g} (tolerance {GRADIENT_TOLERANCE:g})")
 
 
 DEFAULT_NAMES = PARAMETER_NAMES  # E0, EL, L and the six components of w_d: nine parameters
@@ -324,6 +348,9 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         (names[i], names[j], float(correlation[i, j]))
         for i in range(len(names)) for j in range(i + 1, len(names))
         if abs(correlation[i, j]) > CORRELATION_WARNING)
+    gradient = projected_gradient(fit.x, final, fit.jac)
+    relative_gradient = 2.0 * gradient / max(variance_floor, float(final @ final) / final.size,
+                                             NEGLIGIBLE_RESIDUAL_RAD**2)
     return CalibrationResult(
         params=with_parameters(initial, dict(zip(names, values))),
         names=names, values=values, standard_errors=standard_errors, correlation=correlation,
@@ -331,11 +358,25 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         rms_orientation_deg_before=_rms_angle_deg(before, rows_per_pose),
         rms_orientation_deg_after=_rms_angle_deg(final, rows_per_pose),
         evaluations=int(fit.nfev),
-        scaled_gradient_norm=projected_gradient(fit.x, final, fit.jac),
+        scaled_gradient_norm=gradient,
         stop_reason=_STOP_REASONS.get(fit.status, fit.message) + (
             f"; {unsolved_steps[0]} trial step(s) the model could not solve were shortened"
             if unsolved_steps[0] else ""),
+        relative_gradient=relative_gradient,
+        converged=bool(relative_gradient <= GRADIENT_TOLERANCE),
+        at_bound=tuple(name for name, value, lower, upper in zip(names, values, *bounds)
+                       if on_bound(value, lower, upper, _default(model, name))),
     )
+
+
+def on_bound(value: float, lower: float, upper: float, default: float | None = None) -> bool:
+    """Whether ``value`` sits on ``lower`` or ``upper`` (`BOUND_SHARE`), a bound equal to
+    the parameter's no-effect ``default`` not counting (an effect fitted away)."""
+    if lower > 0.0 and upper >= 1e3 * lower:
+        value, lower, upper, default = (np.log(max(value, lower)), np.log(lower), np.log(upper),
+                                        None if default is None or default <= 0.0 else np.log(default))
+    margin = BOUND_SHARE * (upper - lower)
+    return any(abs(value - bound) <= margin and bound != default for bound in (lower, upper))
 
 
 _STOP_REASONS = {

@@ -21,6 +21,9 @@ PLAUSIBLE_WEIGHT_SCALE = (0.7, 1.5)
 # A ring turned by more than this is closer to a relabelling of the jets than to a
 # capsule glued on askew.
 RING_ANGLE_SUSPECT_DEG = 25.0
+# The parameters whose place on a bound these warnings explain (a wider margin than
+# `calibration.BOUND_SHARE`, with the likely setup error).
+BOUND_CHECKED = ("E0", "EL")
 
 
 def setup_warnings(names: tuple[str, ...], values: tuple[float, ...],
@@ -37,7 +40,7 @@ def setup_warnings(names: tuple[str, ...], values: tuple[float, ...],
     if weight is not None and not PLAUSIBLE_WEIGHT_SCALE[0] <= weight <= PLAUSIBLE_WEIGHT_SCALE[1]:
         warnings.append(f"weight scale {weight:.2f}, far from 1: check capsule.mass_kg and rod.density_kg_m3, "
                         "the jet forces' unit (N), and whether the tracker is level (gravity.in_tracker_m_s2)")
-    for name in ("E0", "EL"):
+    for name in BOUND_CHECKED:
         if name in fitted:
             lower, upper = bounds(name)
             # Moduli span decades: their bounds are judged on a log scale.

@@ -15,14 +15,16 @@ from ..analysis.diagnosis import UNEXPLAINED, Diagnosis, DiagnosisSettings, diag
 from ..bench.plan_choice import choose_plan
 from ..effects import load_effect
 from ..plans import Plan, calibration_plan, validation_sweeps
-from ..profile import load_profile
+from ..geometry import quat_multiply
+from ..profile import hanging_orientation, load_profile
 from ..analysis.diagnosis.setup import setup_hypothesis
 from ..twin import DigitalTwin, TwinConfig, parse_setup_error, setup_error_text
 from .cells import NONE, Cell
 
-# The rod lying along the tracker's x axis: the base frame's z turned a quarter turn
-# about the tracker's y (w, x, y, z).
-HORIZONTAL_BASE_ORIENTATION = (math.sqrt(0.5), 0.0, math.sqrt(0.5), 0.0)
+# From hanging to lying across gravity: a half turn about the base frame's (x + z) axis
+# takes its z to where its x was, so gravity falls along the base x axis (w, x, y, z).
+# Under the default tracker (z up) the rod then lies along the tracker's x axis.
+HANGING_TO_HORIZONTAL = (0.0, math.sqrt(0.5), 0.0, math.sqrt(0.5))
 # "short": 12 calibration poses and every jet swept twice (5 steps up, 5 down): the
 # smallest plan whose split still holds out a repetition of each sweep.
 SHORT_POSES, SHORT_STEPS_UP = 12, 5
@@ -124,8 +126,8 @@ def _simulate_and_diagnose(cell: Cell) -> Diagnosis:
     noise = profile.config.twin.noise
     changes["noise"] = type(noise)(**{field: getattr(noise, field) * cell.noise_scale
                                       for field in noise.__struct_fields__})
-    if cell.orientation == "horizontal":
-        changes["base_orientation_in_tracker"] = HORIZONTAL_BASE_ORIENTATION
+    # The orientation is the study's, whatever clamp orientation the profile gives.
+    changes["base_orientation_in_tracker"] = base_orientation(cell.orientation, profile.gravity_in_tracker_m_s2)
     if cell.setup is not None:
         changes["setup"] = parse_setup_error(setup_error_text(*cell.setup))
     config = TwinConfig.from_profile(profile, **changes)
@@ -133,6 +135,18 @@ def _simulate_and_diagnose(cell: Cell) -> Diagnosis:
     steps = recording.to_dataset(profile, f"study cell {cell.id}").quasistatic_steps()
     # The study's engine already runs one cell per worker: no pool inside a cell.
     return diagnose(steps, cell.model, settings=DiagnosisSettings(workers=1))
+
+
+def base_orientation(orientation: str, gravity_in_tracker_m_s2) -> tuple[float, float, float, float]:
+    """The clamp orientation in the tracker frame (w, x, y, z) of a study's rig
+    orientation under a profile's gravity (m/s^2, tracker frame): "hanging", the rod
+    straight down along gravity (`hanging_orientation`); "horizontal", gravity along the
+    base x axis, across the rod."""
+    hanging = hanging_orientation(gravity_in_tracker_m_s2)
+    if orientation == "hanging":
+        return hanging
+    turned = quat_multiply(hanging, HANGING_TO_HORIZONTAL)
+    return tuple(float(value) for value in (turned if turned[0] >= 0.0 else -turned))  # type: ignore[return-value]
 
 
 def _diagnosis_columns(cell: Cell, diagnosis: Diagnosis) -> dict:

@@ -109,3 +109,29 @@ def test_steps_of_a_single_sample_are_warned_in_the_output_and_the_json(hysteret
         assert main(["compare", str(table), "--params", str(params), "--json", str(document)]) == 0
         assert (warning in " ".join(capsys.readouterr().err.split())) == warned
         assert json.loads(document.read_text())["single_sample_steps"] == expected
+
+
+def test_a_value_pushed_onto_its_bound_is_warned_written_and_exits_3(tmp_path, capsys):
+    """A jet 60 % stronger than nominal, fitted with gains that may reach 1.5: the file is
+    written, but the command says the value sits on its bound and exits 3, not 0."""
+    profile = load_profile("sim")
+    twin = DigitalTwin(TwinConfig.from_profile(profile, hidden_effects=("jet_gain",), seed=3,
+                                               hidden_effect_values=(("jet_gain.gain_2", 1.6),)))
+    table = tmp_path / "strong.csv"
+    write_csv(twin.run_plan(calibration_plan(20, seed=3), record_window_s=1.0).to_dataset(profile, "strong jet"),
+              table)
+    output, document = tmp_path / "p.toml", tmp_path / "p.json"
+    assert main(["calibrate", str(table), "--effect", "jet_gain", "-o", str(output), "--json", str(document)]) == 3
+    printed = " ".join(capsys.readouterr().out.split())
+    assert "warning: jet_gain.gain_2 = 1.5 sits on its bound (0 to 1.5)" in printed
+    content = read_parameter_file(output)
+    assert content.calibration["at_bound"] == ["jet_gain.gain_2"]
+    assert json.loads(document.read_text())["calibration"]["at_bound"] == ["jet_gain.gain_2"]
+
+
+def test_a_converged_fit_says_so_in_the_file(hysteretic, tmp_path):
+    output = tmp_path / "p.toml"
+    assert main(["calibrate", str(hysteretic), "-o", str(output)]) == 0
+    calibration = read_parameter_file(output).calibration
+    assert calibration["converged"] is True and "at_bound" not in calibration
+    assert calibration["convergence"].startswith("converged: ")

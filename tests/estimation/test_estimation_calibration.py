@@ -7,7 +7,7 @@ import pytest
 
 from hydrojet_bench.commands.perf import calibration_benchmark_poses
 from hydrojet_bench.errors import ConvergenceError
-from hydrojet_bench.estimation.calibration import CalibrationPose, calibrate
+from hydrojet_bench.estimation.calibration import CalibrationPose, calibrate, on_bound
 from hydrojet_bench.geometry import so3_exp
 from hydrojet_bench.models import CosseratModel, PrbModel
 from hydrojet_bench.params import ModelParameters, with_parameters
@@ -41,6 +41,8 @@ def test_noise_free_poses_give_back_the_true_parameters(position_weight):
     for name, value in expected.items():
         assert result.values[result.names.index(name)] == pytest.approx(value, rel=1e-4, abs=1e-7), name
     assert result.params.rod.youngs_modulus_base_pa == pytest.approx(2.7e5, rel=1e-4)
+    # No noise to judge the gradient against: the fit converged to the solver's precision.
+    assert result.converged, result.convergence
 
 
 def test_noisy_poses_land_within_their_standard_errors_and_flag_degenerate_pairs():
@@ -52,6 +54,38 @@ def test_noisy_poses_land_within_their_standard_errors_and_flag_degenerate_pairs
         assert abs(value - TRUTH_VALUES[name]) < 4.0 * error, (name, value, error)
     assert 0.3 < result.rms_orientation_deg_after < 1.0  # the noise floor, not below it
     assert result.unidentifiable == ()
+    assert result.converged and result.at_bound == (), result.convergence
+
+
+def test_a_fit_stopped_short_says_it_did_not_converge():
+    result = calibrate(CosseratModel(), poses(angle_noise_deg=0.7), INITIAL, max_evaluations=3)
+    assert not result.converged
+    assert result.convergence.startswith("NOT converged: evaluation limit reached after 3 evaluations")
+
+
+def test_a_value_the_data_push_past_its_bound_is_flagged():
+    # A jet 60 % stronger than nominal; the fit may make it only 50 % stronger.
+    model = CosseratModel(("gravity", "jet_gain"))
+    truth = with_parameters(INITIAL, {"jet_gain.gain_1": 1.6})
+    rng = np.random.default_rng(2)
+    strong = []
+    for _ in range(20):
+        jets = rng.uniform(0.0, 0.08, 3)
+        strong.append(CalibrationPose(jets, model.solve(jets, truth).tip_sensor_in_base_sensor(), GRAVITY))
+    result = calibrate(model, strong, INITIAL, names=("E0", "EL", "jet_gain.gain_1"))
+    assert result.values[2] == pytest.approx(1.5)
+    assert result.at_bound == ("jet_gain.gain_1",)
+
+
+@pytest.mark.parametrize("value, lower, upper, default, expected", [
+    (0.9995, -1.0, 1.0, None, True), (-0.9995, -1.0, 1.0, None, True), (0.99, -1.0, 1.0, None, False),
+    # An effect fitted away sits on its no-effect default, not on a bound.
+    (0.0, 0.0, 100.0, 0.0, False), (100.0, 0.0, 100.0, 0.0, True),
+    # Moduli span five decades: judged on their logarithm, 1.005 kPa is on 1 kPa and 2 kPa is not.
+    (1.005e3, 1e3, 1e8, None, True), (2e3, 1e3, 1e8, None, False), (9.95e7, 1e3, 1e8, None, True),
+])
+def test_on_bound(value, lower, upper, default, expected):
+    assert on_bound(value, lower, upper, default) == expected
 
 
 def test_independent_poses_do_not_crawl_along_the_stiffness_length_valley():

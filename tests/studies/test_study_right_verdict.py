@@ -6,7 +6,11 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
-from hydrojet_bench.studies.cell import right_verdict
+import numpy as np
+import pytest
+
+from hydrojet_bench.geometry import matrix_from_quat
+from hydrojet_bench.studies.cell import base_orientation, right_verdict
 from hydrojet_bench.studies.cells import Cell
 
 FLOOR, THRESHOLD = 0.157, 0.179
@@ -62,3 +66,13 @@ def test_none_is_right_only_at_the_floor_and_outside_effects_want_unexplained():
     outside = cell("sweep", "tether", ("/studies/effects/tether.py:Tether",))
     assert right_verdict(outside, diagnosis([stage("unexplained", remaining=True)], []))
     assert not right_verdict(outside, diagnosis([stage("tracker_tilt")], ["tracker_tilt"]))
+
+
+@pytest.mark.parametrize("gravity_in_tracker", [(0.0, 0.0, -9.81), (9.81, 0.0, 0.0), (3.0, 4.0, -8.0)])
+def test_a_cell_hangs_or_lays_the_rod_whatever_the_profile_gives(gravity_in_tracker):
+    # A profile whose tracker lies on its side, or whose clamp is already turned: the
+    # study's orientation decides where gravity falls in the base frame.
+    magnitude = float(np.linalg.norm(gravity_in_tracker))
+    for orientation, expected in (("hanging", (0.0, 0.0, magnitude)), ("horizontal", (magnitude, 0.0, 0.0))):
+        rotation = matrix_from_quat(base_orientation(orientation, gravity_in_tracker))
+        np.testing.assert_allclose(rotation.T @ np.array(gravity_in_tracker), expected, atol=1e-12)

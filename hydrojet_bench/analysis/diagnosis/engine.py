@@ -18,6 +18,10 @@
      (baseline^2 - candidate^2) / (baseline^2 - floor^2), on held-out RMSEs) and beat
      the baseline's score; ``unexplained`` when none does. An unconverged fit never
      qualifies and is ranked after every converged one.
+   * ``undecided`` instead of a name or ``unexplained`` when the fits cannot tell: the
+     baseline's fit did not converge (no candidate can be measured against a baseline
+     short of its optimum), or no candidate's did, or one that did not would remove
+     the excess were its fit to be believed.
    * before a stage says ``unexplained``, its one- and two-parameter candidates get a
      second pass: a profile scan of their parameters with the baseline's re-fitted at
      each point (`fitting.profile_starts`), and the decision is taken again. A stiffening
@@ -81,7 +85,7 @@ from .separate import SeparatingPose, separating_poses
 from .setup import SetupFix, fit_discrete, hypotheses, with_setup_stage
 from .split import Split, split_session
 
-NONE, UNEXPLAINED = "none", "unexplained"
+NONE, UNEXPLAINED, UNDECIDED = "none", "unexplained", "undecided"
 DEFAULT_DEPTH = 3
 AT_BOUND_NOTE = "at its bound: may be larger"
 
@@ -192,7 +196,7 @@ class FoundEffect:
 class Diagnosis:
     """The outcome of `diagnose`; see the module docstring for the rules.
 
-    verdict: "none", "unexplained" or the winning effect's name. explanation: the
+    verdict: "none", "unexplained", "undecided" or the winning effect's name. explanation: the
     winner's physics in words (or why there is none). ranking: the qualifying candidates
     by score (the winner first), then the other converged fits by score, then the
     unconverged ones, then failed fits. alternatives: qualifying candidates the held-out
@@ -231,7 +235,7 @@ class Diagnosis:
     separating_poses: tuple[SeparatingPose, ...] = ()
     candidate_fits: dict[str, Fit] = field(default_factory=dict)
     # The setup stage (`setup`): its hypotheses' results, what kind of verdict this is
-    # (setup | physics | none | unexplained) and, for a setup verdict, what to change.
+    # (setup | physics | none | unexplained | undecided) and, for a setup verdict, what to change.
     setup_ranking: tuple[CandidateResult, ...] = ()
     verdict_kind: str = ""
     setup_fix: SetupFix | None = None
@@ -352,7 +356,7 @@ def diagnose(steps: Dataset, model_name: str = "cosserat", known_effects: Sequen
     tried = discrete + setups + candidates
     first = _with_discretization_errors(problem, first, tried)
     stages, current = [], first
-    while (current.verdict not in (NONE, UNEXPLAINED) and current.remaining_excess
+    while (current.verdict not in (NONE, UNEXPLAINED, UNDECIDED) and current.remaining_excess
            and len(stages) + 1 < settings.depth):
         winner = next(c for c in tried if c.name == current.verdict)
         added = at_physical_limits(winner) if current.winner.widened else winner
@@ -424,7 +428,7 @@ def _stage(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baselin
                              problem.gravity_in_base_m_s2, settings.online)
     tried = (*fitted_first[0], *candidates)
     decided = _decide(problem, known, noise, baseline, tried, [*fitted_first[1], *fits], online, settings, started)
-    if decided.verdict != UNEXPLAINED:
+    if decided.verdict not in (UNEXPLAINED, UNDECIDED):
         return decided
     # Second pass: a candidate whose effect trades off against E, L or w_d may sit in the
     # wrong basin (see `fitting.profile_starts`). Only where nothing explained the excess:
@@ -514,6 +518,8 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
         explanation = (f"The baseline's held-out error ({base_rmse:.3f} deg) is at the noise floor "
                        f"({floor:.3f} deg; at most {threshold:.3f} deg is noise at the "
                        f"{settings.significance:.0%} level): no effect is missing that these data can show.")
+    elif (undecided := _undecided(baseline, ranking, settings)) is not None:
+        verdict, explanation = UNDECIDED, undecided
     elif not qualifying:
         verdict = UNEXPLAINED
         remaining = True
@@ -544,6 +550,25 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
         separating_poses=(_separating(problem, candidates, fits, (verdict, *alternatives), floor)
                           if alternatives else ()),
         candidate_fits={candidate.name: result for candidate, result in zip(candidates, fits)})
+
+
+def _undecided(baseline: Fit, ranking: Sequence[CandidateResult], settings: DiagnosisSettings) -> str | None:
+    """Why unconverged fits leave the question open (see the module docstring), or None."""
+    if not baseline.converged:
+        return (f"The baseline's fit is {baseline.convergence}, so no candidate can be measured against it: "
+                "undecided. Check the profile's rod, capsule and mounting against the rig (a soft rod "
+                "folding over, a wrong capsule mass): calibrate shows how far a fit gets from them.")
+    fitted = [c for c in ranking if c.error is None]
+    if fitted and not any(c.converged for c in fitted):
+        return (f"None of the {len(fitted)} candidates' fits converged, so none can be judged: undecided. Check "
+                "the profile's rod, capsule and mounting against the rig.")
+    promising = next((c for c in fitted if not c.converged and c.score_change < 0.0
+                      and c.explained_fraction >= settings.min_explained_fraction), None)
+    if promising is None:
+        return None
+    return (f"No converged fit explains the excess, but {promising.effect} would remove "
+            f"{promising.explained_fraction:.0%} of it were its fit to be believed ({promising.convergence}): "
+            "undecided. Try it alone (--candidate) or record more poses.")
 
 
 def _significantly_worse(errors_deg: np.ndarray, best_errors_deg: np.ndarray, significance: float) -> bool:

@@ -71,7 +71,8 @@ from ...data.dataset import Dataset
 from ...effects import Effect, qualified_parameter_names
 from ...effects.base import at_physical_limits
 from ...errors import ConvergenceError
-from ...estimation.calibration import DEFAULT_NAMES, CalibrationPose, calibrate, calibration_poses
+from ...estimation.calibration import (DEFAULT_NAMES, GRADIENT_TOLERANCE, CalibrationPose, calibrate,
+                                       calibration_poses, on_bound)
 from ...estimation.path import REF, PathPredictor, Predictions
 from ...geometry import body_rotation_error, matrix_from_quat
 from ...models import make_model
@@ -87,14 +88,9 @@ from .split import Split
 CANDIDATE_MAX_EVALUATIONS = 40
 BASELINE_MAX_EVALUATIONS = 100
 CONTINUATION_EVALUATIONS = 60
-# Converged: the projected gradient of chi^2 per parameter scale at most this (see the
-# module docstring).
-GRADIENT_TOLERANCE = 1.0
 # The solver may also stop once a step gains less than this fraction of the cost (1e-6
 # of chi^2 ~ 600 is far below any score difference); the gradient test then judges.
 COST_TOLERANCE = 1e-9
-# A fitted value within this share of its bounds' span from a bound sits on it.
-BOUND_SHARE = 1e-3
 # The coarse scan: grid points per parameter for one- and two-parameter effects, and
 # the step along each axis (share of the bounds' span) for more.
 SCAN_POINTS = {1: 5, 2: 3}
@@ -289,14 +285,9 @@ def _at_bound(candidate: Effect | None, values: dict[str, float]) -> tuple[str, 
     """The candidate's parameters that sit on a search bound other than their default."""
     if candidate is None:
         return ()
-    clipped = []
-    for parameter in candidate.parameters:
-        value = values[f"{candidate.name}.{parameter.name}"]
-        margin = BOUND_SHARE * (parameter.upper - parameter.lower)
-        for bound in (parameter.lower, parameter.upper):
-            if abs(value - bound) <= margin and bound != parameter.default:
-                clipped.append(f"{candidate.name}.{parameter.name}")
-    return tuple(clipped)
+    names = [f"{candidate.name}.{parameter.name}" for parameter in candidate.parameters]
+    return tuple(name for name, parameter in zip(names, candidate.parameters)
+                 if on_bound(values[name], parameter.lower, parameter.upper, parameter.default))
 
 
 def fit_candidate(problem: Problem, candidate: Effect, baseline: ModelParameters,
@@ -554,10 +545,10 @@ def _in_parallel(candidates: Sequence[Effect], work: Callable[[int], Fit], worke
     count = len(candidates)
     workers = min(count, workers if workers is not None else default_workers())
     parallel = workers > 1 and "fork" in multiprocessing.get_all_start_methods()
-    # Most parameters first: the slowest fits should not start last (Dask runs
-    # independent tasks in key order).
-    order = sorted(range(count), key=lambda index: -len(candidates[index].parameters))
-    graph = {("candidate", rank): (_run_work, index) for rank, index in enumerate(order)}
+    # Dask's scheduler picks the order of these independent fits (not their key order).
+    # No order was worth imposing: the slowest fits have one parameter, not the most,
+    # and longest-first by measured time would save about 0.04 s of 1.8 s.
+    graph = {("candidate", index): (_run_work, index) for index in range(count)}
 
     def finished(key, result, graph, state, worker) -> None:
         if progress and isinstance(result, Fit):
@@ -575,7 +566,4 @@ def _in_parallel(candidates: Sequence[Effect], work: Callable[[int], Fit], worke
                 fits = dask.local.get_sync(graph, list(graph))
     finally:
         _WORK = None
-    results: list[Fit | None] = [None] * count
-    for index, result in zip(order, fits):
-        results[index] = result
-    return results  # type: ignore[return-value]
+    return list(fits)

@@ -186,9 +186,8 @@ def with_setup_stage(diagnosis, steps: Dataset, significantly_worse: Callable[[n
     alternative, and a tie across setup and physics names what separates them."""
     setup_ranking = tuple(c for c in diagnosis.ranking if is_setup(c.effect))
     physics = tuple(c for c in diagnosis.ranking if not is_setup(c.effect))
-    if diagnosis.verdict in ("none", "unexplained"):
-        kind = "none" if diagnosis.verdict == "none" else "unexplained"
-        return replace(diagnosis, ranking=physics, setup_ranking=setup_ranking, verdict_kind=kind)
+    if diagnosis.verdict in ("none", "unexplained", "undecided"):
+        return replace(diagnosis, ranking=physics, setup_ranking=setup_ranking, verdict_kind=diagnosis.verdict)
     errors = heldout_errors_deg(diagnosis, steps)
     qualifying = sorted((c for c in diagnosis.ranking if c.qualifies), key=lambda c: c.score)
     best_setup = next((c for c in qualifying if is_setup(c.effect)), None)
