@@ -4,6 +4,7 @@ file it saves, and that mistakes raise `UserError` rather than exiting."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -15,6 +16,7 @@ from matplotlib.figure import Figure
 
 import hydrojet_bench as hj
 from hydrojet_bench.api import StudyResult
+from hydrojet_bench.cli import main
 from hydrojet_bench.data.csv_io import write_csv
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.plans import calibration_plan, validation_sweeps
@@ -72,6 +74,13 @@ def test_per_step_tables_hold_commands_poses_and_errors(mystery, tmp_path):
                                       comparison.predictions.tip_position_in_base_m * 1e3)
     overall = in_memory.table_ii().set_index(["method", "group"])
     assert overall.loc[("ref", "all"), "orientation_rmse_deg"] == in_memory.results["ref"].overall.orientation_rmse_deg
+    # as_dict holds the figures compare --json writes.
+    document = tmp_path / "compare.json"
+    assert main(["compare", str(mystery), "--profile", "sim-mystery", "--params", str(saved), "--online", "--json",
+                 str(document)]) == 0
+    written, as_dict = json.loads(document.read_text()), json.loads(json.dumps(in_memory.as_dict()))
+    for figure in ("orientation_rmse_deg", "position_rmse_mm", "by_sweep", "by_bend"):
+        assert as_dict[figure] == written[figure], figure
 
     # pressure_stiffening shows only over the sweeps' range of forces: fitted on poses and sweeps.
     fitted = calibration.to_pandas()

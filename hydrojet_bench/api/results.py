@@ -123,6 +123,14 @@ class CompareResult:
     def plot(self) -> Figure:
         return figures.step_errors_figure(self.to_pandas(), f"{self.model.name}: error of every validation step")
 
+    def as_dict(self) -> dict:
+        """Table II per method, as `compare --json` writes it (its figures; the command
+        adds its breakdowns), for these parameters and the baseline's when given."""
+        return {"model": self.model.name, "effects": [effect.name for effect in self.model.effects],
+                "parameters": self.parameters_source, **_tables_document(self.results), "steps": len(self.steps),
+                "baseline": None if self.baseline is None else _tables_document(self.baseline),
+                "log_damage": self.log_damage}
+
 
 @dataclass(frozen=True)
 class ReplayResult:
@@ -149,9 +157,7 @@ class ReplayResult:
     def as_dict(self) -> dict:
         """`replay --json`'s document: Table II per method (as `compare` writes it), the
         live difference, the calibration and the skipped steps."""
-        tables = {key: comparison.as_dict() for key, comparison in self.results.items()}
-        document = {name: {key: value[name] for key, value in tables.items()}
-                    for name in ("orientation_rmse_deg", "position_rmse_mm", "by_sweep", "by_bend")}
+        document = _tables_document(self.results)
         calibration = None if self.calibration is None else {
             "poses": self.calibration_poses, "rms_orientation_deg_before": self.calibration.rms_orientation_deg_before,
             "rms_orientation_deg_after": self.calibration.rms_orientation_deg_after,
@@ -238,3 +244,11 @@ def _table_ii(results: dict[str, Comparison]) -> pd.DataFrame:
                   "orientation_rmse_deg": summary.orientation_rmse_deg,
                   "position_rmse_mm": summary.position_rmse_mm} for group, summary in groups.items()]
     return pd.DataFrame(rows)
+
+
+def _tables_document(results: dict[str, Comparison]) -> dict:
+    """Table II of each method ("ref", "online"), as `compare --json` nests it: each
+    figure, then the methods."""
+    tables = {key: comparison.as_dict() for key, comparison in results.items()}
+    return {name: {key: value[name] for key, value in tables.items()}
+            for name in ("orientation_rmse_deg", "position_rmse_mm", "by_sweep", "by_bend")}

@@ -20,8 +20,8 @@ from ..errors import UserError
 from ..files import make_folder_for
 from ..effects import CALIBRATION_POSES, SWEEPS, identifying_rows
 from ..estimation.calibration import (ALL_ROWS, DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_dataset,
-                                      fit_mask, parameter_bounds, rows_that_identify)
-from ..estimation.setup_warnings import BOUND_CHECKED, calibration_warnings
+                                      fit_mask, rows_that_identify)
+from ..estimation.setup_warnings import calibration_warnings
 from ..model_choice import COSSERAT, ModelChoice, model_choice
 from ..params_io import calibration_parameter_file, effect_specs, write_parameter_file
 from . import render
@@ -87,15 +87,6 @@ def run(args: argparse.Namespace) -> int:
     console.print(table)
     console.print(f"RMS orientation error on the {_FITTED_ROWS[fit_on]}: {result.rms_orientation_deg_before:.2f} deg "
                   f"before, {result.rms_orientation_deg_after:.2f} deg after ({result.evaluations} evaluations)")
-    if not result.converged:
-        console.print(f"[yellow]warning:[/] the fit is {result.convergence}: these values are not an optimum; "
-                      "check the profile's starting values, or diagnose the data")
-    for name, value in zip(result.names, result.values):
-        if name in result.at_bound and name not in BOUND_CHECKED:
-            lower, upper = parameter_bounds(model, name)
-            console.print(f"[yellow]warning:[/] {name} = {value:.6g} sits on its bound ({lower:g} to {upper:g}): "
-                          "the data push it past what it may take, so the model misses something it was made to "
-                          "absorb; diagnose looks for it")
     for warning in calibration_warnings(model, result):
         console.print(f"[yellow]warning:[/] {render.plain(warning)}")
     for first, second, correlation in result.unidentifiable:

@@ -52,6 +52,17 @@ def setup_warnings(names: tuple[str, ...], values: tuple[float, ...],
 
 
 def calibration_warnings(model: ShootingModel, result: CalibrationResult) -> list[str]:
-    """`setup_warnings` of ``model``'s calibration ``result`` (what `calibrate` and a
-    session's own calibration show)."""
-    return setup_warnings(result.names, tuple(result.values), lambda name: parameter_bounds(model, name))
+    """What ``model``'s calibration ``result`` must not keep quiet (what `calibrate` and a
+    session's own calibration show): an unconverged fit, a value on its bound, and
+    `setup_warnings`."""
+    warnings = []
+    if not result.converged:
+        warnings.append(f"the fit is {result.convergence}: these values are not an optimum; check the profile's "
+                        "starting values, or diagnose the data")
+    for name, value in zip(result.names, result.values):
+        if name in result.at_bound and name not in BOUND_CHECKED:
+            lower, upper = parameter_bounds(model, name)
+            warnings.append(f"{name} = {value:.6g} sits on its bound ({lower:g} to {upper:g}): the data push it past "
+                            "what it may take, so the model misses something it was made to absorb; diagnose looks "
+                            "for it")
+    return warnings + setup_warnings(result.names, tuple(result.values), lambda name: parameter_bounds(model, name))
