@@ -12,6 +12,7 @@ from pathlib import Path
 
 
 from ..errors import UserError
+from ..logs.records import MAGIC
 from ..studies.batch import DIAGNOSE_COLUMNS, REPLAY_COLUMNS, LogTask, diagnose_log, log_row, replay_log
 from ..studies.engine import dask_client, run_tasks
 from ..studies.store import RowStore
@@ -31,8 +32,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     for action in ACTIONS:
         sub = actions.add_parser(action, help=f"{action} every log, one row each")
-        sub.add_argument("logs", type=Path, nargs="+", metavar="LOG", help="CSV files or MCAP session logs")
-        sub.add_argument("--profile", help="rig profile for CSV files (default: sim; a session log brings its own)")
+        if action == "replay":
+            # Replay re-runs a session's live estimation: only a session log holds it.
+            sub.add_argument("logs", type=Path, nargs="+", metavar="LOG", help="MCAP session logs")
+        else:
+            sub.add_argument("logs", type=Path, nargs="+", metavar="LOG", help="CSV files or MCAP session logs")
+            sub.add_argument("--profile", help="rig profile for CSV files (default: sim; a session log brings its own)")
         if action == "diagnose":
             sub.add_argument("--model", default="cosserat", choices=("cosserat", "prb"),
                              help="model to diagnose (default: cosserat)")
@@ -51,7 +56,18 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"{missing[0]}: no such log")
     if args.workers < 1:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
-    tasks = [LogTask(str(path.resolve()), args.profile, getattr(args, "model", "cosserat")) for path in args.logs]
+    if args.action == "replay":
+        for path in args.logs:
+            try:
+                with path.open("rb") as file:
+                    start = file.read(len(MAGIC))
+            except OSError as error:
+                raise UserError(f"{path}: cannot read: {error.strerror or error}") from None
+            if not start or not MAGIC.startswith(start):
+                raise UserError(f"{path}: not an MCAP session log; replay re-runs a session's live estimation, which "
+                                "only its log holds (batch diagnose takes CSV tables)")
+    tasks = [LogTask(str(path.resolve()), getattr(args, "profile", None), getattr(args, "model", "cosserat"))
+             for path in args.logs]
     with tempfile.TemporaryDirectory(prefix="hydrojet-batch-") as scratch:
         store = RowStore(args.output or Path(scratch), columns, "log_id")
         run_tasks(lambda: dask_client(args.scheduler, args.workers), function, tasks, [task.id for task in tasks],
@@ -66,6 +82,10 @@ def run(args: argparse.Namespace) -> int:
     for row in rows:
         view.add_row(Path(row["log"]).name, *(_cell(row[name]) for name in shown), row["error"] or "")
     console.print(view)
+    warnings = render.console(stderr=True)
+    for row in rows:
+        if row["log_damage"]:
+            warnings.print(f"warning: {row['log_damage']}", markup=False, highlight=False)
     if args.output:
         console.print(f"rows stored under {store.rows_folder}")
     if args.json:

@@ -103,7 +103,8 @@ def run(args: argparse.Namespace) -> int:
         from ..api import CalibrateResult
 
         render.write_json(args.json, {**CalibrateResult(model, choice.effect_specs, steps.select(rows), result,
-                                                        content).as_dict(), "profile_mismatch": profile_mismatch,
+                                                        content).as_dict(), "log_damage": log_damage,
+                                    "profile_mismatch": profile_mismatch,
                                     "single_sample_steps": single_sample_steps})
     compare = command("compare", *input_words(args), "--params", args.output, "--online")
     print_next(console, "see how it predicts the sweeps with", [compare])

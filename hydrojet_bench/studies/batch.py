@@ -16,12 +16,12 @@ from ..errors import UserError
 DIAGNOSE_COLUMNS: dict[str, str] = {
     "log_id": "string", "log": "string", "model": "string", "steps": "int64", "verdict": "string",
     "alternatives": "string", "baseline_heldout_rmse_deg": "float64", "winner_heldout_rmse_deg": "float64",
-    "noise_floor_deg": "float64", "seconds": "float64", "error": "string",
+    "noise_floor_deg": "float64", "log_damage": "string", "seconds": "float64", "error": "string",
 }
 REPLAY_COLUMNS: dict[str, str] = {
     "log_id": "string", "log": "string", "model": "string", "steps": "int64",
     "validation_orientation_rmse_deg": "float64", "live_difference_deg": "float64", "truncated": "bool", "damaged": "bool",
-    "seconds": "float64", "error": "string",
+    "log_damage": "string", "seconds": "float64", "error": "string",
 }
 
 
@@ -60,7 +60,7 @@ def diagnose_log(task: LogTask) -> dict:
         row.update(steps=len(steps), verdict=diagnosis.verdict, alternatives=",".join(diagnosis.alternatives),
                    baseline_heldout_rmse_deg=diagnosis.baseline_heldout_rmse_deg,
                    winner_heldout_rmse_deg=None if winner is None else winner.heldout_orientation_rmse_deg,
-                   noise_floor_deg=diagnosis.noise_floor_deg)
+                   noise_floor_deg=diagnosis.noise_floor_deg, log_damage=_log_damage(task.path))
     except Exception as error:  # noqa: BLE001 - one bad log is a row, the batch goes on
         row["error"] = _one_line(error)
     row["seconds"] = time.perf_counter() - started
@@ -88,13 +88,24 @@ def replay_log(task: LogTask) -> dict:
         results = compare_steps([estimates[i] for i in validation], session.steps.select(validation))
         condition = log_condition(task.path)
         row.update(model=session.model_name, steps=len(session.steps), truncated=condition.truncated,
-                   damaged=condition.damage is not None,
+                   damaged=condition.damage is not None, log_damage=None if condition.whole else condition.notice(),
                    validation_orientation_rmse_deg=float(results["ref"].overall.orientation_rmse_deg),
                    live_difference_deg=live_difference_deg(session, estimates))
     except Exception as error:  # noqa: BLE001
         row["error"] = _one_line(error)
     row["seconds"] = time.perf_counter() - started
     return row
+
+
+def _log_damage(path: str) -> str | None:
+    """What a session log lacks, in one line (`LogCondition.notice`); None for a whole log
+    or a table."""
+    from ..logs.condition import log_condition
+
+    if Path(path).suffix.lower() != ".mcap":
+        return None
+    condition = log_condition(path)
+    return None if condition.whole else condition.notice()
 
 
 def _one_line(error: Exception) -> str:

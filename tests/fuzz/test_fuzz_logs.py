@@ -133,7 +133,8 @@ def digest(path: Path) -> str:
 COMMANDS = {
     "recover": lambda v, out, r: ["recover", str(v.path), "-o", str(out / "recovered.mcap")],
     "replay": lambda v, out, r: ["replay", str(v.path)],
-    "calibrate": lambda v, out, r: ["calibrate", str(v.path), "-o", str(out / "params.toml")],
+    "calibrate": lambda v, out, r: ["calibrate", str(v.path), "-o", str(out / "params.toml"), "--json",
+                                    str(out / "out.json")],
     "compare": lambda v, out, r: ["compare", str(v.path), "--params", str(r.params), "--json", str(out / "out.json")],
     "sensors": lambda v, out, r: ["sensors", str(v.path), "--json", str(out / "out.json")],
     # One candidate: the log's damage reaches a diagnosis through its steps, whatever it fits.

@@ -56,20 +56,29 @@ TINY_PLAN = "settle_s = 2.0\n" + "".join(
     for q1, q2, sweep, step in ((0.02, 0.0, -1, 0), (0.0, 0.03, -1, 1), (0.04, 0.0, 0, 0), (0.0, 0.05, 0, 1)))
 
 
-def test_batch_replay_reproduces_the_live_estimates_and_records_a_csv_it_cannot_replay(logs: list[Path],
-                                                                                         tmp_path: Path):
+def test_batch_replay_reproduces_the_live_estimates_and_says_which_log_was_cut(logs: list[Path], tmp_path: Path):
     plan = tmp_path / "tiny.toml"
     plan.write_text(TINY_PLAN)
     session = tmp_path / "session.mcap"
     run = subprocess.run([sys.executable, "-m", "hydrojet_bench.cli", "run", "--plan", str(plan), "--no-live",
                           "--time-scale", "10", "--log", str(session)], capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr
-    result = batch("replay", str(session), str(logs[0]), "--json", "-", "--workers", "1")
-    assert result.returncode == 1
-    replayed, failed = json.loads(result.stdout)
+    cut = tmp_path / "cut.mcap"
+    data = session.read_bytes()
+    cut.write_bytes(data[:int(0.9 * len(data))])  # the summary and footer gone
+    result = batch("replay", str(session), str(cut), "--json", "-", "--workers", "1")
+    assert result.returncode == 0, result.stderr
+    replayed, truncated = json.loads(result.stdout)
     assert replayed["error"] is None and replayed["steps"] == 4 and replayed["model"] == "cosserat"
     assert replayed["live_difference_deg"] == 0.0 and 0.0 < replayed["validation_orientation_rmse_deg"] < 10.0
-    assert failed["error"] and "Traceback" not in failed["error"] and failed["validation_orientation_rmse_deg"] is None
+    assert replayed["log_damage"] is None and not replayed["truncated"]
+    assert truncated["truncated"] and truncated["log_damage"].startswith(f"{cut}: it is truncated")
+    assert f"warning: {cut}: it is truncated" in " ".join(result.stderr.split())
+    # A table holds no live estimation to replay: refused before any work, in one line.
+    refused = batch("replay", str(session), str(logs[0]))
+    assert refused.returncode == 2 and refused.stderr.strip() == (
+        f"error: {logs[0]}: not an MCAP session log; replay re-runs a session's live estimation, which only its log "
+        "holds (batch diagnose takes CSV tables)")
 
 
 def test_batch_of_a_missing_log_is_one_line(tmp_path: Path):
