@@ -39,6 +39,21 @@ def check_writable_target(path: Path, what: str, *, overwrite: bool) -> None:
         raise refuse_existing(path, what)
 
 
+def check_replaceable(path: Path, what: str, of_its_kind: Callable[[bytes], bool]) -> None:
+    """Refuse, with one line, to replace an existing ``path`` whose first bytes are not
+    ``of_its_kind``: a derived output (a parameter file, a JSON document) replaces an
+    earlier one of its kind, never a session log, a table or a profile named as the
+    output by mistake (``calibrate run.mcap -o run.mcap``). An empty file may go."""
+    try:
+        with Path(path).open("rb") as file:
+            head = file.read(64)
+    except OSError:
+        return  # nothing there (or nothing readable): the write itself says what is wrong
+    if head and not of_its_kind(head):
+        raise UserError(f"{path}: exists and is not a {what}; refusing to replace it (is it an input?): give the "
+                        f"{what} another path")
+
+
 def make_folder_for(path: Path) -> None:
     """Create the missing folders above ``path``, or say in one line why not."""
     try:

@@ -29,6 +29,7 @@ from .effects import Effect
 from .effects.user import CheckedEffect
 from .config.schema import Finite
 from .errors import UserError
+from .files import check_replaceable
 from .params import PARAMETER_NAMES, PLAUSIBLE_RANGES, ModelParameters, check_plausible, with_parameters
 
 if TYPE_CHECKING:
@@ -126,8 +127,18 @@ def _table(name: str, values: Mapping[str, object]) -> list[str]:
     return lines + [""]
 
 
+# The first line of every parameter file the bench writes: what it may replace.
+_HEADER = "# HydroJet Bench calibrated parameters (SI units)"
+
+
+def check_parameter_output(path: Path) -> None:
+    """Refuse (`check_replaceable`) to write a parameter file over anything but an earlier one."""
+    check_replaceable(path, "parameter file", lambda head: head.startswith(_HEADER.encode()))
+
+
 def write_parameter_file(path: Path, content: ParameterFile) -> None:
-    lines = ["# HydroJet Bench calibrated parameters (SI units)",
+    check_parameter_output(path)
+    lines = [_HEADER,
              f"model = {_format(content.model)}", f"effects = {_format(list(content.effects))}", ""]
     lines += _table("parameters", content.parameters)
     if content.standard_errors:

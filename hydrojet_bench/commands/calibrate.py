@@ -23,7 +23,7 @@ from ..estimation.calibration import (ALL_ROWS, DEFAULT_POSITION_WEIGHT_RAD_PER_
                                       fit_mask, rows_that_identify)
 from ..estimation.setup_warnings import calibration_warnings
 from ..model_choice import COSSERAT, ModelChoice, model_choice
-from ..params_io import calibration_parameter_file, effect_specs, write_parameter_file
+from ..params_io import calibration_parameter_file, check_parameter_output, effect_specs, write_parameter_file
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
 from .next_steps import command, input_words, print_next
@@ -61,6 +61,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--position-weight must be from 0 to {MAX_POSITION_WEIGHT_RAD_PER_M:g} rad per m (there, "
                         f"a millimetre outweighs ten radians), got {args.position_weight}")
     choice = model_choice(args)  # validates --effect before the data is read
+    # Before the fit: neither output may replace an input or other data.
+    check_parameter_output(args.output)
+    render.check_json_output(args.json)
     model = choice.model
     profile, steps = load_steps(args.input, args.profile)
     log_damage = warn_if_incomplete(args.input)

@@ -78,6 +78,7 @@ class Evaluation:
 
 
 def run(args: argparse.Namespace) -> int:
+    render.check_json_output(args.json)  # before the work: it may not replace an input
     before_choice = None if args.baseline is None else choose_model(args.model, (), args.baseline,
                                                                     effect_files=args.effect)
     after_choice = model_choice(args)

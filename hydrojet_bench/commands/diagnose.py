@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     profile_mismatch = warn_if_recorded_elsewhere(args.input, args.profile, profile)
     single_sample_steps = warn_if_unsettled(args.input, steps, log_damage)
     console = render.console_for(args)
-    diagnosis = _diagnose(args, profile, steps, choice, candidates, Console(stderr=True))
+    diagnosis = _diagnose(args, profile, steps, choice, candidates, render.console(stderr=True))
     print_diagnosis(console, diagnosis, args)
     tried = candidates or default_candidates(choice.requested)
     if args.export is not None:

@@ -12,9 +12,8 @@ from __future__ import annotations
 import argparse
 import time
 
-from rich.console import Console
-
 from ..errors import UserError
+from . import render
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -30,7 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    console = Console(stderr=True)
+    console = render.console(stderr=True)
     plant = _plant(args)
     if args.device == "valves":
         if not args.watchdog_ms > 0:

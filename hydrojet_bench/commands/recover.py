@@ -12,9 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rich.console import Console
-
 from ..logs import recover_log, recovered_path
+from . import render
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -35,10 +34,10 @@ def run(args: argparse.Namespace) -> int:
         span = (f"{report.messages} messages, t = {report.first_t_s:.3f} s to {report.last_t_s:.3f} s "
                 f"({report.last_t_s - report.first_t_s:.3f} s)")
     state = "was truncated (unfinished); kept everything before the cut" if report.truncated else "was complete"
-    console = Console()
+    console = render.console()
     console.print(f"{args.input} {state}", highlight=False, soft_wrap=True, markup=False)
     if report.damage is not None:
-        Console(stderr=True).print(f"warning: {args.input} is damaged: {report.damage.describe()}; kept every intact "
-                                   "chunk", highlight=False, soft_wrap=True, markup=False)
+        render.console(stderr=True).print(f"warning: {args.input} is damaged: {report.damage.describe()}; kept every "
+                                          "intact chunk", highlight=False, soft_wrap=True, markup=False)
     console.print(f"wrote {output}: {span}", highlight=False, soft_wrap=True, markup=False)
     return 0

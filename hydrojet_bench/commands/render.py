@@ -19,6 +19,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import UserError
+from ..files import check_replaceable
 
 STDOUT = "-"
 # The width of a console that is not a terminal: a table is printed at its natural width
@@ -94,6 +95,13 @@ def json_row(row: dict) -> dict:
     return {key: None if isinstance(value, float) and math.isnan(value) else value for key, value in values.items()}
 
 
+def check_json_output(path: Path | None) -> None:
+    """Refuse (`check_replaceable`) to write a JSON document over anything but an earlier
+    one; standard output and no path pass."""
+    if path is not None and not _is_stdout(path):
+        check_replaceable(Path(path), "JSON document", lambda head: head.lstrip()[:1] in (b"{", b"["))
+
+
 def write_json(path: Path, document: object) -> None:
     """``document`` as indented JSON to ``path`` (``-``: standard output); a path that
     cannot be written is a `UserError`."""
@@ -101,6 +109,7 @@ def write_json(path: Path, document: object) -> None:
     if _is_stdout(path):
         sys.stdout.write(text)
         return
+    check_json_output(path)
     try:
         Path(path).write_text(text)
     except OSError as error:

@@ -21,7 +21,8 @@ import argparse
 import time
 
 import numpy as np
-from rich.console import Console
+
+from . import render
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -97,7 +98,7 @@ def _emulate_devices(twin) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    console = Console(stderr=True)
+    console = render.console(stderr=True)
     started = time.perf_counter()
     console.print("compiling the kernels (once per checkout: a few minutes on a 2-core machine, "
                   "seconds when already compiled)", highlight=False, soft_wrap=True)

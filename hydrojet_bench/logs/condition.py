@@ -28,7 +28,9 @@ class LogCondition:
 
     @property
     def whole(self) -> bool:
-        return not self.truncated and self.damage is None
+        """Nothing to say: it ends properly, nothing inside is damaged, and it holds every
+        step of its plan (a log recovered from a cut file ends properly but does not)."""
+        return not self.truncated and self.damage is None and not self.steps_missing
 
     @property
     def steps_missing(self) -> int | None:
@@ -39,6 +41,9 @@ class LogCondition:
         problems = (["it is truncated (the session did not finish, or the file was cut)"] if self.truncated else [])
         if self.damage is not None:
             problems.append(f"it is damaged: {self.damage.describe()}")
+        if not problems:
+            problems.append("it ends before its plan did (the session was stopped, or the log was recovered from a "
+                            "cut file)")
         missing = self.steps_missing
         steps = (f"{self.steps_logged} settled steps ({self.calibration_poses_logged} calibration poses)"
                  if missing is None else

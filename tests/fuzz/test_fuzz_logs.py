@@ -160,13 +160,19 @@ def test_commands_on_cut_and_damaged_logs(recorded: Recorded, command: str, tmp_
             assert len(errors) == 1 and variant.name in errors[0], (command, variant.name, captured.err)
             assert len(lines) == 1 or (len(lines) == 2 and lines[0].startswith("warning: ")), captured.err
             continue
-        assert code == 0, (command, variant.name, code)
+        # A calibration on what is left may be short of poses to converge or pin a value on
+        # its bound: it says so and exits 3 (its warnings are not the log's).
+        assert code == 0 or (command == "calibrate" and code == 3), (command, variant.name, code)
         condition = log_condition(variant.path)
         assert not condition.whole, variant.name
         if command == "recover":
             assert read_log(out / "recovered.mcap").messages == read_log(variant.path).messages
             assert ("was truncated" in captured.out) if not variant.damaged else True
             assert (f"warning: {variant.path} is damaged" in captured.err) == (condition.damage is not None)
+            # The recovered log ends properly, but still lacks what the cut took: analyses say so.
+            recovered = log_condition(out / "recovered.mcap")
+            assert recovered.steps_missing == condition.steps_missing, variant.name
+            assert recovered.whole == (not condition.steps_missing), variant.name
             continue
         # One warning line about the log, naming what the analysis is missing.
         warnings = [line for line in captured.err.splitlines() if line.startswith("warning: ")]

@@ -135,3 +135,28 @@ def test_a_fifo_as_input_is_refused_not_waited_on(tmp_path: Path, capsys, name: 
     os.mkfifo(fifo)
     assert main([command[0], str(fifo), *command[1:]]) == 2
     assert f"{fifo}: cannot read: it is a FIFO; expected a regular file" in one_line(capsys)
+
+
+def test_an_output_never_replaces_an_input_or_other_data(tmp_path: Path, capsys) -> None:
+    """`calibrate run.csv -o run.csv` used to replace the table with a parameter file,
+    and `--json params.toml` the parameters with JSON: refused before any work."""
+    table = tmp_path / "run.csv"
+    assert main(["simulate", "-o", str(table), "--seed", "1"]) == 0
+    params, document = tmp_path / "p.toml", tmp_path / "p.json"
+    capsys.readouterr()
+    recorded = table.read_bytes()
+    for arguments, path, what in (
+            (["calibrate", str(table), "-o", str(table)], table, "parameter file"),
+            (["calibrate", str(table), "-o", str(params), "--json", str(table)], table, "JSON document")):
+        assert main(arguments) == 2
+        assert one_line(capsys) == (f"error: {path}: exists and is not a {what}; refusing to replace it (is it an "
+                                    "input?): "
+                                    f"give the {what} another path")
+        assert table.read_bytes() == recorded and not params.exists()
+    # Earlier outputs of the same kind are replaced, as calibrating again means to.
+    for _ in range(2):
+        assert main(["calibrate", str(table), "-o", str(params), "--json", str(document)]) == 0
+    written = params.read_bytes()
+    assert main(["compare", str(table), "--params", str(params), "--json", str(params)]) == 2
+    assert "p.toml: exists and is not a JSON document" in one_line(capsys)
+    assert params.read_bytes() == written
