@@ -134,8 +134,13 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
                        highlight=False, markup=False)
     from ..bench.event_loop import run_session
 
-    result = run_session(_run_session(request, progress, live=not args.no_live and progress.is_terminal,
-                                      clipped=frozenset(clipped), on_log_message=server and server.publish))
+    try:
+        result = run_session(_run_session(request, progress, live=not args.no_live and progress.is_terminal,
+                                          clipped=frozenset(clipped), on_log_message=server and server.publish))
+    except KeyboardInterrupt:
+        # The session has closed the valves and finished its log on the way out.
+        progress.print(f"[yellow]interrupted:[/] valves closed, log finished: {render.plain(log_path)}")
+        return 130
     if result is None:
         progress.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
         return 143

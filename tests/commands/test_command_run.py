@@ -53,6 +53,7 @@ def test_a_signal_stops_the_session_cleanly(tmp_path, signal_number, exit_code):
             process.communicate()
     assert process.returncode == exit_code, output
     assert "Traceback" not in output
+    assert "valves closed, log finished" in " ".join(output.split())
     contents = read_log(log_path)
     assert not contents.truncated  # finished: summary and footer written
     assert any("interrupted" in m.message for m in contents.on(Event))
