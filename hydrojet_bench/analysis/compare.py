@@ -12,7 +12,7 @@ taken per step from the measured base orientation.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -36,6 +36,18 @@ class Comparison:
     by_sweep: dict
     by_bend: dict
     predictions: Predictions
+    # Steps where online estimation could not be solved as usual, and what it did there
+    # (`StepPrediction.online_fallback`): (step index, what) pairs.
+    fallbacks: tuple[tuple[int, str], ...] = ()
+
+    def fallback_notice(self) -> str:
+        """One line on `fallbacks` ("" when there are none)."""
+        if not self.fallbacks:
+            return ""
+        shown = ", ".join(str(index) for index, _ in self.fallbacks[:5]) + (", ..." if len(self.fallbacks) > 5 else "")
+        return (f"online estimation could not be solved as usual on {len(self.fallbacks)} of "
+                f"{len(self.orientation_error_deg)} steps ({shown}; first: {self.fallbacks[0][1]}); their Proposed "
+                "predictions carry less or no correction")
 
     def as_dict(self) -> dict:
         return {
@@ -71,6 +83,9 @@ def compare_steps(predicted: Sequence[StepPrediction], steps: Dataset) -> dict[s
         predictions = Predictions.along(predicted, method)
         if predictions is not None:
             results[method] = compare(predictions, steps)
+    if ONLINE in results:
+        fallbacks = tuple((index, step.online_fallback) for index, step in enumerate(predicted) if step.online_fallback)
+        results[ONLINE] = replace(results[ONLINE], fallbacks=fallbacks)
     return results
 
 

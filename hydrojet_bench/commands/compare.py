@@ -102,6 +102,10 @@ def run(args: argparse.Namespace) -> int:
     noise = noise_floor(steps)
     console = render.console_for(args)
     print_tables(console, after.results, f"{after.model.name} on {args.input}")
+    for evaluation in filter(None, (after, before)):
+        if "online" in evaluation.results and evaluation.results["online"].fallbacks:
+            console.print(f"[yellow]warning:[/] {evaluation.source}: "
+                          f"{render.plain(evaluation.results['online'].fallback_notice())}")
     print_breakdowns(console, after, validation, noise)
     if before is not None:
         print_before_after(console, before, after)
@@ -331,6 +335,8 @@ def figures(evaluation: Evaluation, steps: Dataset) -> dict:
     details = {key: part.as_dict() for key, part in evaluation.breakdowns.items()}
     document.update({name: {key: value[name] for key, value in details.items()} for name in BREAKDOWN_KEYS})
     document["per_step"] = {key: per_step(comparison, steps) for key, comparison in results.items()}
+    if "online" in results:
+        document["online_fallbacks"] = [{"step": index, "what": what} for index, what in results["online"].fallbacks]
     if "online" in results:
         document["missing_wrench"] = {
             "label": MISSING_LABEL, "quantity": "online disturbance estimate, moment part, N m, tip frame",

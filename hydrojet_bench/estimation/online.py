@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit
 
 from ..config.schema import OnlineSettings
+from ..errors import ConvergenceError
 from ..geometry import matrix_from_quat
 from ..models import kernels
 from ..models.shooting import seeds_kernel
@@ -46,6 +47,8 @@ class EstimateStep:
     to-base orientation before the first and after the last update of this step.
     disturbance_moment_nm: the estimate after this step (tip frame, N m).
     solution: the model's shape with that estimate (the "Proposed" prediction).
+    fallback: what the estimator did instead when the model could not be solved ("" if
+    nothing went wrong).
     """
 
     error_before_deg: float
@@ -53,6 +56,9 @@ class EstimateStep:
     iterations: int
     disturbance_moment_nm: np.ndarray
     solution: Solution
+    # Why this step's estimate is not the usual one ("": it is): the model could not be
+    # solved with the carried estimate, or with a correction (`_update`).
+    fallback: str = ""
 
 
 class OnlineDisturbanceEstimator:
@@ -142,10 +148,24 @@ class OnlineDisturbanceEstimator:
                             model.solution_from(packed, work))
 
     def _update(self, packed: PreparedProblem, measured: np.ndarray, budget: int) -> EstimateStep:
-        """One update through the model's own solve path (cold start, ramping if need be)."""
+        """One update through the model's own solve path (cold start, ramping if need be).
+
+        An estimate carried from the last step can load the rod beyond what the model
+        solves under this step's jets (a heavy rod near a fold): the step then starts
+        again from the calibrated w_d. A correction the model cannot solve is not made:
+        the step keeps the estimate before it. Either is said in ``fallback``."""
         moment = self._moment
-        prepared = packed.with_disturbance_moment(moment)
-        solution = self.model.solve_prepared(prepared, self._previous)
+        fallback = ""
+        try:
+            prepared = packed.with_disturbance_moment(moment)
+            solution = self.model.solve_prepared(prepared, self._previous)
+        except ConvergenceError:
+            calibrated = np.array(self.params.disturbance.moment_nm, dtype=float)
+            if np.array_equal(moment, calibrated):
+                raise  # the calibrated model itself fails here: the caller's to report
+            moment, prepared = calibrated, packed
+            solution = self.model.solve_prepared(prepared, self._previous)
+            fallback = "the carried estimate could not be solved: restarted from the calibrated w_d"
         omega = np.empty(3)
         error_before = error = self._error_deg(solution, measured, omega)
         done = 0
@@ -153,16 +173,21 @@ class OnlineDisturbanceEstimator:
         turn = np.empty(3)
         while done < budget and error > self.settings.tolerance_deg:
             steps = DEFAULT_RELATIVE_STEP * np.maximum(np.abs(moment), _MOMENT_SCALES)
-            columns, seed = disturbance_columns(self.model, prepared, solution, _MOMENT_COMPONENTS, steps)
-            _moment_change(np.ascontiguousarray(columns[3:]), omega, solution.tip_sensor_mounting,
-                           self.settings.damping, self.settings.gain, change, turn)
-            moment = moment + change
-            prepared = packed.with_disturbance_moment(moment)
-            # The same columns predict where the tip turns: the solve starts there.
-            solution = self.model.solve_prepared(prepared, seed, predicted_tip_turn_rad=turn)
+            try:
+                columns, seed = disturbance_columns(self.model, prepared, solution, _MOMENT_COMPONENTS, steps)
+                _moment_change(np.ascontiguousarray(columns[3:]), omega, solution.tip_sensor_mounting,
+                               self.settings.damping, self.settings.gain, change, turn)
+                moved = moment + change
+                corrected = packed.with_disturbance_moment(moved)
+                # The same columns predict where the tip turns: the solve starts there.
+                solved = self.model.solve_prepared(corrected, seed, predicted_tip_turn_rad=turn)
+            except ConvergenceError:
+                fallback = "; ".join(filter(None, (fallback, "a correction could not be solved: not made")))
+                break
+            moment, prepared, solution = moved, corrected, solved
             error = self._error_deg(solution, measured, omega)
             done += 1
-        return EstimateStep(error_before, error, done, moment, solution)
+        return EstimateStep(error_before, error, done, moment, solution, fallback)
 
     @staticmethod
     def _error_deg(solution: Solution, measured: np.ndarray, omega: np.ndarray) -> float:

@@ -68,7 +68,8 @@ class StepPrediction:
     online: None when online estimation is off. disturbance_force_n: w_d|f, the
     calibrated constant (tip frame, N). error_before_deg: the online prediction's error
     before this step's correction (deg); iterations: corrections made (both None when
-    online estimation is off)."""
+    online estimation is off). online_fallback: what the estimator did instead on this
+    step when the model could not be solved (`EstimateStep.fallback`)."""
 
     index: int
     ref: Prediction
@@ -76,6 +77,7 @@ class StepPrediction:
     disturbance_force_n: np.ndarray
     error_before_deg: float | None
     iterations: int | None
+    online_fallback: str = ""
 
     @property
     def best(self) -> Prediction:
@@ -151,7 +153,7 @@ class PathPredictor:
             return self._next_record(ref)
         online, = _predictions(ONLINE, [estimate.solution], estimate.disturbance_moment_nm[np.newaxis], measured,
                                positions)
-        return self._next_record(ref, online, estimate.error_before_deg, estimate.iterations)
+        return self._next_record(ref, online, estimate.error_before_deg, estimate.iterations, estimate.fallback)
 
     def _solve(self, jet_forces_n: np.ndarray, measured_tip_in_base: np.ndarray,
                gravity_in_base_m_s2: np.ndarray) -> tuple[Solution, EstimateStep | None]:
@@ -173,9 +175,9 @@ class PathPredictor:
         return self._ref_params
 
     def _next_record(self, ref: Prediction, online: Prediction | None = None, error_before_deg: float | None = None,
-                     iterations: int | None = None) -> StepPrediction:
+                     iterations: int | None = None, fallback: str = "") -> StepPrediction:
         record = StepPrediction(self._count, ref, online, np.array(self.params.disturbance.force_n), error_before_deg,
-                                iterations)
+                                iterations, fallback)
         self._count += 1
         return record
 
@@ -196,7 +198,7 @@ class PathPredictor:
             onlines = _predictions(ONLINE, [estimate.solution for estimate in estimates],
                                    np.array([estimate.disturbance_moment_nm for estimate in estimates]), measured,
                                    positions)
-            return [self._next_record(ref, online, estimate.error_before_deg, estimate.iterations)
+            return [self._next_record(ref, online, estimate.error_before_deg, estimate.iterations, estimate.fallback)
                     for ref, online, estimate in zip(refs, onlines, estimates)]
         # Ref. alone: each run of steps under one gravity is one batch of solves.
         records: list[StepPrediction] = []

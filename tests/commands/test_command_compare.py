@@ -48,7 +48,9 @@ def test_baseline_shows_the_error_fall_when_the_effect_is_added(calibrated, caps
                  "--online", "--json", str(out), "--report", str(report)]) == 0
     figures = json.loads(out.read_text())
     baseline = figures["baseline"]
-    assert set(figures) == TABLE_2_KEYS | BREAKDOWN_KEYS | NOISE_KEYS | {"missing_wrench", "baseline", "as_diagnosed"}
+    assert set(figures) == TABLE_2_KEYS | BREAKDOWN_KEYS | NOISE_KEYS | {"missing_wrench", "online_fallbacks",
+                                                                         "baseline", "as_diagnosed"}
+    assert figures["online_fallbacks"] == []  # online estimation solved every step as usual
     assert set(baseline) == set(figures) - {"baseline"} - NOISE_KEYS
     # Calibration hides the clogged jet in E, so its error is not the largest of the three;
     # the per-jet fit shows it as the weak jet, by far more than its standard error.

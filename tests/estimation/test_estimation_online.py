@@ -10,7 +10,7 @@ import pytest
 
 from hydrojet_bench.effects import EffectParameter
 from hydrojet_bench.estimation import OnlineDisturbanceEstimator, OnlineSettings
-from hydrojet_bench.geometry import rotation_angle_deg
+from hydrojet_bench.geometry import rotation_angle_deg, so3_exp
 from hydrojet_bench.models import CosseratModel, PrbModel
 from hydrojet_bench.effects.problem import RodProblem
 from hydrojet_bench.params import ModelParameters
@@ -201,3 +201,69 @@ def test_damped_least_squares_with_no_sensitivity_changes_nothing():
     change = np.full(3, np.nan)
     _damped_least_squares(np.zeros((3, 3)), np.array([0.01, -0.02, 0.0]), 1e-3, 0.4, change)
     np.testing.assert_array_equal(change, np.zeros(3))
+
+
+def _failing_solves(model, monkeypatch, fails):
+    """``model`` whose solves raise ConvergenceError where ``fails(prepared, turn)`` says."""
+    from hydrojet_bench.errors import ConvergenceError
+
+    solve = model.solve_prepared
+
+    def solve_prepared(prepared, warm_start=None, predicted_tip_turn_rad=None):
+        if fails(prepared, predicted_tip_turn_rad):
+            raise ConvergenceError("cosserat model did not converge (as the test wants)")
+        return solve(prepared, warm_start, predicted_tip_turn_rad=predicted_tip_turn_rad)
+
+    monkeypatch.setattr(model, "solve_prepared", solve_prepared)
+
+
+def test_an_estimate_the_model_cannot_carry_restarts_from_the_calibrated_one(monkeypatch):
+    model = CosseratModel()
+    jets = np.array([0.04, 0.0, 0.0])
+    measured = model.solve(jets, PARAMS).tip_sensor_in_base_sensor()
+    estimator = _python_path_only(OnlineDisturbanceEstimator(model, PARAMS), monkeypatch)
+    estimator._moment = np.array([0.0, 0.0, 5e-3])  # carried from steps the model could follow
+    calibrated = np.array(PARAMS.disturbance.moment_nm)
+    _failing_solves(model, monkeypatch, lambda prepared, turn: turn is None and not np.array_equal(
+        prepared.tip, model.prepare(jets, PARAMS).tip))
+    step = estimator.update(jets, measured)
+    assert step.fallback == "the carried estimate could not be solved: restarted from the calibrated w_d"
+    assert step.error_before_deg < 1e-6  # the calibrated model is right here
+    np.testing.assert_array_equal(step.disturbance_moment_nm, calibrated)
+
+
+def test_a_correction_the_model_cannot_solve_is_not_made(monkeypatch):
+    model = CosseratModel()
+    jets = np.array([0.04, 0.0, 0.0])
+    measured = model.solve(jets, PARAMS).tip_sensor_in_base_sensor() @ so3_exp(np.radians([0.5, 0.5, 0.0]))
+    estimator = _python_path_only(OnlineDisturbanceEstimator(model, PARAMS), monkeypatch)
+    _failing_solves(model, monkeypatch, lambda prepared, turn: turn is not None)
+    step = estimator.update(jets, measured)
+    assert step.fallback == "a correction could not be solved: not made"
+    assert step.iterations == 0 and step.error_after_deg == step.error_before_deg > 0.5
+    np.testing.assert_array_equal(step.disturbance_moment_nm, PARAMS.disturbance.moment_nm)
+    # Without failures the same step corrects as usual and says nothing.
+    monkeypatch.undo()
+    usual = OnlineDisturbanceEstimator(model, PARAMS).update(jets, measured)
+    assert usual.fallback == "" and usual.iterations >= 1 and usual.error_after_deg < step.error_after_deg
+
+
+def test_a_comparison_says_on_which_steps_online_estimation_fell_back(monkeypatch):
+    from hydrojet_bench.analysis.compare import compare_methods
+    from hydrojet_bench.twin import DigitalTwin, TwinConfig
+    from hydrojet_bench.plans import calibration_plan
+    from hydrojet_bench.profile import load_profile
+
+    profile = load_profile("sim")
+    steps = DigitalTwin(TwinConfig.from_profile(profile, seed=2)).run_plan(
+        calibration_plan(4, seed=2), record_window_s=0.5).to_dataset(profile, "four poses").quasistatic_steps()
+    model = CosseratModel()
+    monkeypatch.setattr(OnlineDisturbanceEstimator, "_update_in_kernel", lambda *args: None)
+    _failing_solves(model, monkeypatch, lambda prepared, turn: turn is not None)
+    results = compare_methods(model, profile.model_parameters(), steps, OnlineSettings(tolerance_deg=0.0))
+    assert results["ref"].fallbacks == ()
+    assert results["online"].fallbacks == tuple((index, "a correction could not be solved: not made")
+                                                for index in range(4))
+    assert results["online"].fallback_notice() == (
+        "online estimation could not be solved as usual on 4 of 4 steps (0, 1, 2, 3; first: a correction could not "
+        "be solved: not made); their Proposed predictions carry less or no correction")
