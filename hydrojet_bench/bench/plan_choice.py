@@ -40,7 +40,8 @@ def choose_plan(spec: str, settle_s: float = DEFAULT_SETTLE_S, seed: int = 0) ->
     if name == "calibration":
         if not colon:
             return calibration_plan(seed=seed, settle_s=settle_s)
-        if not argument.isdigit() or int(argument) < 1:
+        # isdigit alone takes "²", which int() refuses.
+        if not (argument.isascii() and argument.isdigit()) or int(argument) < 1:
             raise UserError(f"plan {spec!r}: calibration:COUNT takes a whole number of poses >= 1")
         return calibration_plan(int(argument), seed=seed, settle_s=settle_s)
     if name == "sweeps":

@@ -157,11 +157,15 @@ def _annotation_at(schema: type, parts: list[str | int | None]) -> Any:
     current: Any = schema
     for part in parts:
         current = _member_for(_without_none(current), part)
+        if typing.get_origin(current) is typing.Annotated and isinstance(part, int):
+            current = typing.get_args(current)[0]  # a constrained list: its items
         origin, arguments = typing.get_origin(current), typing.get_args(current)
         if isinstance(part, str) and _struct_in(current) is not None:
             current = typing.get_type_hints(_struct_in(current), include_extras=True).get(part)
         elif origin is dict:
             current = arguments[1]
+        elif origin is list and isinstance(part, int):
+            current = arguments[0]
         elif origin is tuple and isinstance(part, int):
             current = arguments[0] if arguments[-1] is Ellipsis else arguments[min(part, len(arguments) - 1)]
         else:
@@ -196,7 +200,7 @@ def _phrase(annotation: Any) -> str:
         described = [meta.description for meta in arguments[1:] if getattr(meta, "description", None)]
         if described:
             return described[0]
-        words = _SCALAR_WORDS.get(arguments[0], "a value")
+        words = _SCALAR_WORDS.get(arguments[0]) or _phrase(arguments[0])
         bounds = []
         for meta in arguments[1:]:
             for name, symbol in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<=")):
@@ -212,9 +216,12 @@ def _phrase(annotation: Any) -> str:
         return " or ".join(_phrase(a) for a in arguments if a is not type(None))
     if origin is typing.Literal:
         return "one of " + ", ".join(repr(argument) for argument in arguments)
+    if origin is list:
+        return _phrase(tuple[arguments[0], ...])
     if origin is tuple:
         item = _phrase(arguments[0]).removeprefix("a ").removeprefix("an ")
-        item = item.replace("number", "numbers").replace("string", "strings").replace("list ", "lists ")
+        item = (item.replace("number", "numbers").replace("string", "strings").replace("integer", "integers")
+                .replace("list ", "lists "))
         if arguments[-1] is Ellipsis:
             return f"a list of {item}"
         return f"a list of {len(arguments)} {item}"

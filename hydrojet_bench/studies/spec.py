@@ -39,10 +39,12 @@ from typing import Annotated, Literal
 import msgspec
 import numpy as np
 
+from ..bench.plan_choice import choose_plan
 from ..config.loading import convert, read_toml
 from ..effects import Effect, load_effect
 from ..errors import UserError
 from ..models import MODELS
+from ..profile import load_profile
 from ..twin.setup_errors import parse_setup_error, setup_error_text
 
 Orientation = Literal["hanging", "horizontal"]
@@ -164,6 +166,14 @@ def load_study(path: Path) -> Study:
             raise UserError(f"{source}: models[{index}] = {model!r} is no model; known: {', '.join(MODELS)}")
     profiles = tuple(_relative(name, folder, suffix=".toml") for name in spec.profiles)
     plans = tuple(_relative(name, folder) for name in spec.plans)
+    # Every cell would fail on a profile or plan that does not load: said here, before any runs.
+    for key, names, load in (("profiles", profiles, load_profile),
+                             ("plans", plans, lambda name: name == "short" or choose_plan(name))):
+        for index, name in enumerate(names):
+            try:
+                load(name)
+            except UserError as error:
+                raise UserError(f"{source}: {key}[{index}]: {error}") from None
     sweeps = []
     for index, sweep in enumerate(spec.effects):
         key = f"effects[{index}]"

@@ -25,7 +25,12 @@ from hydrojet_bench.studies.spec import load_study
     ('[[effects]]\neffect = "nothing_like_it"\nparameter = "x"\nsizes = [1.0]\n',
      "effects[0].effect: unknown effect 'nothing_like_it'"),
     ('models = ["lumped"]\n', "models[0] = 'lumped' is no model"),
-    ('orientations = ["upside-down"]\n', "orientations[0]"),
+    # Every cell would fail on these: refused before any runs.
+    ('plans = ["nope"]\n', "plans[0]: plan 'nope': neither a built-in plan"),
+    ('profiles = ["nope"]\n', "profiles[0]: rig profile 'nope' not found"),
+    ('orientations = ["upside-down"]\n', "orientations[0] must be one of 'hanging', 'horizontal', got 'upside-down'"),
+    ('seeds = "zero"\n', "seeds must be a list of integers, got 'zero'"),
+    ('seeds = ["zero"]\n', "seeds[0] must be an integer, got 'zero'"),
     ('[[pairs]]\neffects = ["jet_gain", "base_compliance"]\nvalues = {"jet_gain.gain_1" = 9.0}\n',
      "pairs[0].values.jet_gain.gain_1: 9.0 is outside"),
     ('[[setup]]\nerror = "jet_wiring"\nsizes = [[1, 1, 2]]\n',
