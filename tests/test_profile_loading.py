@@ -206,6 +206,7 @@ def test_the_shipped_physical_rig_with_a_misspelt_table_does_not_load(tmp_path: 
     ("[estimator]\ngain = 2.0\n", "estimator.gain", "must be in (0, 1]"),
     ("[twin]\nseed = 'x'\n", "twin.seed", "must be an integer >= 0, got 'x'"),
     ("[twin.noise]\nem_orientation_rms_deg = -1.0\n", "twin.noise.em_orientation_rms_deg", ">= 0, got -1.0"),
+    ("[twin.noise]\nem_position_rms_m = 0.48\n", "twin.noise.em_position_rms_m", "= 0.48 is past 0.05"),
     ('[twin.hidden_effect_values]\n"gravity.weight_scale" = "big"\n',
      'twin.hidden_effect_values."gravity.weight_scale"', "must be a finite number, got 'big'"),
 ])

@@ -408,6 +408,13 @@ class EstimatorTable(Table, kw_only=True):
 # --- the simulated rig ---------------------------------------------------------------
 
 
+# The noisiest sensors a simulation takes (a study's noise scale included): five
+# centimetres of tracker noise, 45 degrees of orientation noise, an IMU frame drifting
+# a degree per root second (35 degrees over the protocol).
+_NOISE_LIMITS = {"em_position_rms_m": 0.05, "em_orientation_rms_deg": 45.0, "imu_orientation_rms_deg": 45.0,
+                 "imu_drift_deg_per_sqrt_s": 1.0}
+
+
 class SensorNoise(Table, kw_only=True):
     """Sensor noise of the digital twin and its emulators ([twin.noise]). Totals are RMS
     over all three axes: each axis gets total / sqrt(3), so the norm of a position error or
@@ -438,6 +445,9 @@ class SensorNoise(Table, kw_only=True):
             value = getattr(self, name.name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= _LARGEST:
                 raise ValueError(f"{name.name} must be >= 0 and finite, got {value!r}")
+            if value > _NOISE_LIMITS[name.name]:
+                raise ValueError(f"{name.name} = {value:g} is past {_NOISE_LIMITS[name.name]:g}: sensors that noisy "
+                                 "say nothing about a rod a few centimetres long (a millimetre typed as metres?)")
 
     @classmethod
     def off(cls) -> SensorNoise:

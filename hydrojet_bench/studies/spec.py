@@ -57,7 +57,7 @@ MAX_SIZES = 10_000
 MAX_CELLS = 100_000
 # Multiples of the profile's sensor noise: 1000 x the paper's EM noise is 0.5 m and 700
 # degrees RMS, readings that say nothing of the rod; far larger ones overflow to inf.
-MAX_NOISE_SCALE = 1000.0
+MAX_NOISE_SCALE = 50.0
 # The rows keep the seed in an int64 column.
 MAX_SEED = 2**63 - 1
 
