@@ -353,6 +353,10 @@ def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Name
         if fix.profile_key is None:
             print_next(console, f"{fix.action}, then record the session again.", [])
             return
+        if args.export_profile is not None:  # written already: only the check is left
+            print_next(console, "check the corrected profile with",
+                       [command("diagnose", args.input, "--profile", args.export_profile, *known)])
+            return
         print_next(console, "write the corrected profile and check it with", [
             command("diagnose", *data, *known, "--export-profile", "fixed.toml"),
             command("diagnose", args.input, "--profile", "fixed.toml", *known)])

@@ -131,7 +131,10 @@ def test_a_turned_base_sensor_gets_a_corrected_profile_that_leaves_nothing_to_ex
     document = json.loads(first.read_text())
     assert (document["verdict_kind"], document["verdict"]) == ("setup", "base_sensor_mounting")
     assert document["setup"]["fix"]["profile_key"] == "base_sensor.rotation_in_base"
-    assert "base_sensor.rotation_in_base = [" in " ".join(capsys.readouterr().out.split())
+    printed = " ".join(capsys.readouterr().out.split())
+    assert "base_sensor.rotation_in_base = [" in printed
+    # Next: the profile just written, not the default name of one to write.
+    assert f"check the corrected profile with hydrojet-bench diagnose {recording} --profile {fixed}" in printed
     assert main(["diagnose", str(recording), "--profile", str(fixed), "--candidate", "sensor_mounting",
                  "--json", str(second)]) == 0
     again = json.loads(second.read_text())
