@@ -28,7 +28,8 @@ def add_model_arguments(parser: argparse.ArgumentParser, default: str, params: s
                         params_required: bool = False) -> None:
     """--model and --effect; --params too when ``params`` (its help) is given. default:
     what the command runs without a parameter file or --model, for the help."""
-    fallback = f"the parameter file's, else {default}" if params is not None else default
+    fallback = (default if params is None else "the parameter file's" if params_required
+                else f"the parameter file's, else {default}")
     parser.add_argument("--model", choices=tuple(MODELS), default=None, help=f"kinematic model (default: {fallback})")
     parser.add_argument("--effect", action="append", default=[], metavar="NAME",
                         help="add an effect to the model: a library name or path/to/file.py:Class (repeatable)")

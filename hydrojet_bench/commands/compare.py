@@ -43,8 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("compare", help="model predictions against measurements (Table II), "
                                    "where the model fails, before/after an added effect")
     add_input_arguments(parser)
-    add_model_arguments(parser, default="the parameter file's", params="the parameters to evaluate",
-                        params_required=True)
+    add_model_arguments(parser, default="cosserat", params="the parameters to evaluate", params_required=True)
     parser.add_argument("--baseline", type=Path, metavar="BEFORE",
                         help="a second parameter file (e.g. calibrated without the added effect), "
                              "predicted on the same data with its own model and effects: errors before/after")
