@@ -163,6 +163,11 @@ def test_a_built_in_plans_argument_is_never_ignored(spec, message):
     ("plan.toml", "[[step]]\nq1 = true\nq2 = 0\nq3 = 0\n", r"plan.toml, row 1: q1 must be a number, got True"),
     ("plan.csv", "q1,q2,q3\n0.05,0,0\n# caf\xe9\n", r"plan.csv: not UTF-8 text \(byte \d+\)"),
     ("plan.toml", "# caf\xe9\n[[step]]\nq1 = 0\nq2 = 0\nq3 = 0\n", r"plan.toml: not UTF-8 text \(byte \d+\)"),
+    # Read silently once: a misspelt default settle time, a value past the header, a column twice.
+    ("plan.toml", "setle_s = 2.0\n[[step]]\nq1 = 0\nq2 = 0\nq3 = 0\n",
+     r"plan.toml: setle_s is not a known key; a plan file takes settle_s and \[\[step\]\] tables"),
+    ("plan.csv", "q1,q2,q3\n0.05,0,0,99\n", r"plan.csv, row 1: more values than the header has columns"),
+    ("plan.csv", "q1,q1,q2,q3\n0.05,0.01,0,0\n", r"plan.csv: column 'q1' appears twice in the header"),
 ])
 def test_plan_file_mistakes_name_the_file_and_row(tmp_path, name, content, message):
     path = tmp_path / name

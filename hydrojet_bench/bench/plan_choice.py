@@ -60,11 +60,23 @@ def choose_plan(spec: str, settle_s: float = DEFAULT_SETTLE_S, seed: int = 0) ->
     try:
         if path.suffix.lower() == ".csv":
             with path.open(newline="", encoding="utf-8-sig") as handle:
-                rows = [{key.strip(): value for key, value in row.items() if key is not None}
-                        for row in csv.DictReader(line for line in handle if not line.startswith("#"))]
+                reader = csv.DictReader(line for line in handle if not line.startswith("#"))
+                header = [name.strip() for name in reader.fieldnames or ()]
+                repeated = next((name for name in header if header.count(name) > 1), None)
+                if repeated is not None:
+                    raise ValueError(f"{path}: column {repeated!r} appears twice in the header")
+                rows = []
+                for number, row in enumerate(reader, start=1):
+                    if None in row:  # DictReader's key for values past the header's columns
+                        raise ValueError(f"{path}, row {number}: more values than the header has columns")
+                    rows.append({key.strip(): value for key, value in row.items()})
             return plan_from_rows(rows, str(path), settle_s)
         if path.suffix.lower() == ".toml":
             document = read_toml(path, what="plan file")
+            unknown = sorted(set(document) - {"settle_s", "step"})
+            if unknown:
+                raise ValueError(f"{path}: {unknown[0]} is not a known key; a plan file takes settle_s and "
+                                 "[[step]] tables")
             default = document.get("settle_s", settle_s)
             steps = document.get("step")
             if not isinstance(steps, list) or not all(isinstance(row, dict) for row in steps):
