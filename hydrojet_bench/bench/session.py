@@ -33,6 +33,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import msgspec
 import numpy as np
 
 from drivers.aurora.client import FRAME_PERIOD_S, AuroraTracker
@@ -252,6 +253,9 @@ class Session:
             "software_version": __version__,
             "profile_name": request.profile.name,
             "profile_toml": request.profile.path.read_text() if request.profile.path else "",
+            # The profile as the session used it, `extends` resolved: the file's text
+            # alone names its parent by a path that may mean another file later.
+            "profile_resolved_json": json.dumps(msgspec.to_builtins(request.profile.config)),
             "plan_steps": str(len(request.plan)),
             "model": request.model.name,
             "effects": json.dumps(list(request.effects)),

@@ -2,12 +2,15 @@
 
 Each ``/bench/sample`` message (a `Sample` record) is one row of the CSV contract
 (`hydrojet_bench.data.csv_io`), with the same meaning; rows are taken in file order.
-The rig profile is the one given, else the one the bench embedded in the log's metadata
-(``bench.profile_toml``, the profile file's text, and ``bench.profile_name``).
+The rig profile is the one given, else the one the bench embedded in the log's metadata:
+``bench.profile_resolved_json``, the profile as the session used it (``extends``
+resolved), or in logs written before it, ``bench.profile_toml`` (the file's text) and
+``bench.profile_name``.
 """
 
 from __future__ import annotations
 
+import json
 import tomllib
 from pathlib import Path
 
@@ -88,6 +91,14 @@ def rig_profile_of_log(path: Path, profile: RigProfile | str | Path | None,
     if profile is not None:
         return load_profile(profile)
     bench = metadata.get("bench", {})
+    resolved = bench.get("profile_resolved_json")
+    if resolved:
+        where = f"{path}, metadata bench.profile_resolved_json"
+        try:
+            return profile_from_mapping(json.loads(resolved), source=where)
+        except json.JSONDecodeError as error:
+            raise UserError(f"{where}: not valid JSON: {error}") from None
+    # Logs written before the resolved profile was embedded: the file's own text.
     text = bench.get("profile_toml")
     if not text:
         raise UserError(f"{path}: the log embeds no rig profile (metadata bench.profile_toml); "

@@ -144,3 +144,21 @@ def test_log_problems_name_the_file(tmp_path: Path) -> None:
     (tmp_path / "notes.mcap").write_text("t,q1\n")
     with pytest.raises(UserError, match="notes.mcap: not an MCAP file"):
         load_dataset(tmp_path / "notes.mcap", None)
+
+
+def test_a_log_keeps_the_profile_its_session_used_whatever_its_parent_becomes(tmp_path: Path, monkeypatch) -> None:
+    """A profile extending a sibling file names it by a relative path: read back from
+    the log's text, it was found from the working directory, or edited since."""
+    from hydrojet_bench.cli import main
+
+    (tmp_path / "parent.toml").write_text('extends = "sim"\n[rod]\nlength_m = 0.08\n')
+    (tmp_path / "child.toml").write_text('extends = "parent.toml"\n[capsule]\nmass_kg = 0.003\n')
+    plan = tmp_path / "plan.toml"
+    plan.write_text("settle_s = 2.0\n[[step]]\nq1 = 0.02\nq2 = 0.0\nq3 = 0.0\n")
+    log = tmp_path / "child.mcap"
+    assert main(["run", "--profile", str(tmp_path / "child.toml"), "--plan", str(plan), "--no-live",
+                 "--no-calibration", "--time-scale", "10", "--log", str(log)]) == 0
+    (tmp_path / "parent.toml").write_text('extends = "sim"\n[rod]\nlength_m = 0.05\n')
+    monkeypatch.chdir(tmp_path.parent)
+    recorded = dataset_from_log(log).profile
+    assert (recorded.name, recorded.config.rod.length_m, recorded.config.capsule.mass_kg) == ("child", 0.08, 0.003)
