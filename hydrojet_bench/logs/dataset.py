@@ -20,7 +20,7 @@ from ..data.dataset import Dataset, SampleFlag, saturation_flags
 from ..errors import UserError
 from ..profile import RigProfile, load_profile, profile_from_mapping
 from .reader import read_log
-from .topics import Sample
+from .topics import Sample, Step
 
 SAMPLE_TOPIC = Sample.topic
 
@@ -31,14 +31,22 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
 
     profile: a `RigProfile`, a TOML path or a shipped profile's name; None uses the
         profile embedded in the log.
-    A truncated log gives the samples before the cut. Raises `UserError` naming the file
+    A truncated log gives the samples before the cut, less those of a step the cut
+    interrupted. Raises `UserError` naming the file
     if there are no samples of that source, a sample is malformed or breaks the CSV
     contract, or no profile is to be had.
     """
     path = Path(path)
-    contents = read_log(path, topics=[SAMPLE_TOPIC])
+    contents = read_log(path, topics=[SAMPLE_TOPIC, Step.topic])
     samples = contents.on(Sample)
     rows = [sample for sample in samples if sample.source == source]
+    if contents.truncated and rows:
+        # Cut while its last step settled: those samples are no equilibrium (no
+        # /bench/step record says it finished), and would be fitted as one.
+        last = (rows[-1].sweep, rows[-1].step)
+        if last not in {(step.sweep, step.step) for step in contents.on(Step)}:
+            while rows and (rows[-1].sweep, rows[-1].step) == last:
+                rows.pop()
     if not rows:
         sources = sorted({sample.source for sample in samples})
         found = f"it has samples from {', '.join(sources)} only" if sources else f"it has no {SAMPLE_TOPIC} messages"

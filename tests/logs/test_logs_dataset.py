@@ -96,19 +96,25 @@ def test_the_embedded_profile_is_used_unless_one_is_given(tmp_path: Path) -> Non
     assert load_steps(csv, None)[0].name == "sim"  # CSV keeps its default
 
 
-def test_a_truncated_log_gives_the_samples_before_the_cut(tmp_path: Path) -> None:
+@pytest.mark.parametrize("last_step_finished", [True, False])
+def test_a_truncated_log_gives_the_samples_before_the_cut(tmp_path: Path, last_step_finished: bool) -> None:
+    """...less those of a step the cut interrupted: rows 35-39 are step 7, whose
+    /bench/step record (written once it settled) is there or not."""
     path = tmp_path / "run.mcap"
     rows = recorded_rows()
     log = LogWriter(path, metadata=SIM_METADATA, flush_interval_s=1e6)
     for i in range(40):
         log.write(sample(rows, i))
+    if last_step_finished:
+        log.write(msgspec.structs.replace(EXAMPLES["/bench/step"], t_s=float(rows.time_s[39]),
+                                          sweep=int(rows.sweep[39]), step=int(rows.step[39])))
     log.flush()
     log.write(sample(rows, 40))  # never flushed: lost
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(path.read_bytes())
     log.close()
     assert read_log(cut).truncated
-    assert_same(dataset_from_log(cut), rows.select(np.arange(40)))
+    assert_same(dataset_from_log(cut), rows.select(np.arange(40 if last_step_finished else 35)))
 
 
 def test_log_problems_name_the_file(tmp_path: Path) -> None:
