@@ -272,21 +272,28 @@ def test_a_training_cost_stops_early_only_once_the_point_has_lost(monkeypatch):
     assert all(result == whole for result, whole, bound in calls if whole <= bound)
 
 
-def _fit_state(converged, score_change=0.0, explained=0.0, error=None, effect="candidate"):
-    """What `_undecided` reads of a fit or a candidate's result."""
+def _fit_state(converged, score_change=0.0, explained=0.0, heldout_deg=1.0, effect="candidate"):
+    """What `_undecided` reads of a fit or a candidate's result (one that converged,
+    explains half the excess and lowers the score qualifies)."""
     from types import SimpleNamespace
 
     return SimpleNamespace(effect=effect, converged=converged, score_change=score_change,
-                           explained_fraction=explained, error=error,
+                           explained_fraction=explained, error=None, heldout_orientation_rmse_deg=heldout_deg,
+                           qualifies=converged and explained >= 0.5 and score_change < 0.0,
                            convergence=("converged" if converged else "NOT converged") + ": as stated")
+
+
+FLOOR_THRESHOLD_DEG = 0.2
 
 
 @pytest.mark.parametrize("baseline, ranking, undecided", [
     # Converged fits decide: a winner, or nothing explains the excess.
     (True, [(True, -50.0, 0.9), (True, 5.0, 0.1)], None),
     (True, [(True, 5.0, 0.1), (False, 3.0, 0.2)], None),
-    # A baseline short of its optimum cannot be measured against.
-    (False, [(True, -50.0, 0.9)], "The baseline's fit is NOT converged"),
+    # A baseline short of its optimum cannot be measured against...
+    (False, [(True, -50.0, 0.9, 0.5)], "The baseline's fit is NOT converged"),
+    # ... unless a candidate brings the held-out error to the floor.
+    (False, [(True, -50.0, 1.0, 0.15)], None),
     # No candidate converged.
     (True, [(False, -50.0, 0.9), (False, 5.0, 0.1)], "None of the 2 candidates' fits converged"),
     # One that did not converge would explain the excess.
@@ -296,5 +303,6 @@ def _fit_state(converged, score_change=0.0, explained=0.0, error=None, effect="c
 def test_unconverged_fits_leave_the_verdict_undecided(baseline, ranking, undecided):
     from hydrojet_bench.analysis.diagnosis.engine import _undecided
 
-    said = _undecided(_fit_state(baseline), [_fit_state(*state) for state in ranking], DiagnosisSettings())
+    said = _undecided(_fit_state(baseline), [_fit_state(*state) for state in ranking], FLOOR_THRESHOLD_DEG,
+                      DiagnosisSettings())
     assert (said is None) if undecided is None else said.startswith(undecided), said

@@ -20,8 +20,9 @@
      qualifies and is ranked after every converged one.
    * ``undecided`` instead of a name or ``unexplained`` when the fits cannot tell: the
      baseline's fit did not converge (no candidate can be measured against a baseline
-     short of its optimum), or no candidate's did, or one that did not would remove
-     the excess were its fit to be believed.
+     short of its optimum, unless it brings the held-out error to the floor), or no
+     candidate's did, or one that did not would remove the excess were its fit to be
+     believed.
    * before a stage says ``unexplained``, its one- and two-parameter candidates get a
      second pass: a profile scan of their parameters with the baseline's re-fitted at
      each point (`fitting.profile_starts`), and the decision is taken again. A stiffening
@@ -518,7 +519,7 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
         explanation = (f"The baseline's held-out error ({base_rmse:.3f} deg) is at the noise floor "
                        f"({floor:.3f} deg; at most {threshold:.3f} deg is noise at the "
                        f"{settings.significance:.0%} level): no effect is missing that these data can show.")
-    elif (undecided := _undecided(baseline, ranking, settings)) is not None:
+    elif (undecided := _undecided(baseline, ranking, threshold, settings)) is not None:
         verdict, explanation = UNDECIDED, undecided
     elif not qualifying:
         verdict = UNEXPLAINED
@@ -552,12 +553,18 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
         candidate_fits={candidate.name: result for candidate, result in zip(candidates, fits)})
 
 
-def _undecided(baseline: Fit, ranking: Sequence[CandidateResult], settings: DiagnosisSettings) -> str | None:
-    """Why unconverged fits leave the question open (see the module docstring), or None."""
-    if not baseline.converged:
+def _undecided(baseline: Fit, ranking: Sequence[CandidateResult], threshold_deg: float,
+               settings: DiagnosisSettings) -> str | None:
+    """Why unconverged fits leave the question open (see the module docstring), or None.
+    A qualifying candidate that brings the held-out error down to the floor
+    (``threshold_deg``) needs no baseline to be measured against."""
+    qualifying = [c for c in ranking if c.qualifies]
+    if not baseline.converged and not any(c.heldout_orientation_rmse_deg <= threshold_deg for c in qualifying):
         return (f"The baseline's fit is {baseline.convergence}, so no candidate can be measured against it: "
                 "undecided. Check the profile's rod, capsule and mounting against the rig (a soft rod "
                 "folding over, a wrong capsule mass): calibrate shows how far a fit gets from them.")
+    if qualifying:
+        return None
     fitted = [c for c in ranking if c.error is None]
     if fitted and not any(c.converged for c in fitted):
         return (f"None of the {len(fitted)} candidates' fits converged, so none can be judged: undecided. Check "
