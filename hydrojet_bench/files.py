@@ -44,6 +44,8 @@ def check_replaceable(path: Path, what: str, of_its_kind: Callable[[bytes], bool
     ``of_its_kind``: a derived output (a parameter file, a JSON document) replaces an
     earlier one of its kind, never a session log, a table or a profile named as the
     output by mistake (``calibrate run.mcap -o run.mcap``). An empty file may go."""
+    if Path(path).is_dir():
+        raise UserError(f"{path}: is a directory; give the {what} a file name")
     try:
         with Path(path).open("rb") as file:
             head = file.read(64)

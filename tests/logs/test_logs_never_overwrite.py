@@ -156,6 +156,8 @@ def test_an_output_never_replaces_an_input_or_other_data(tmp_path: Path, capsys)
     # Earlier outputs of the same kind are replaced, as calibrating again means to.
     for _ in range(2):
         assert main(["calibrate", str(table), "-o", str(params), "--json", str(document)]) == 0
+    assert main(["calibrate", str(table), "-o", str(tmp_path)]) == 2
+    assert one_line(capsys) == f"error: {tmp_path}: is a directory; give the parameter file a file name"
     written = params.read_bytes()
     assert main(["compare", str(table), "--params", str(params), "--json", str(params)]) == 2
     assert "p.toml: exists and is not a JSON document" in one_line(capsys)
