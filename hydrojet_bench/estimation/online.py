@@ -47,8 +47,8 @@ class EstimateStep:
     to-base orientation before the first and after the last update of this step.
     disturbance_moment_nm: the estimate after this step (tip frame, N m).
     solution: the model's shape with that estimate (the "Proposed" prediction).
-    fallback: what the estimator did instead when the model could not be solved ("" if
-    nothing went wrong).
+    fallback: what the estimator did instead when the model could not be solved with the
+    carried estimate or with a correction (`_update`; "" if nothing went wrong).
     """
 
     error_before_deg: float
@@ -56,8 +56,6 @@ class EstimateStep:
     iterations: int
     disturbance_moment_nm: np.ndarray
     solution: Solution
-    # Why this step's estimate is not the usual one ("": it is): the model could not be
-    # solved with the carried estimate, or with a correction (`_update`).
     fallback: str = ""
 
 
