@@ -306,3 +306,14 @@ def test_unconverged_fits_leave_the_verdict_undecided(baseline, ranking, undecid
     said = _undecided(_fit_state(baseline), [_fit_state(*state) for state in ranking], FLOOR_THRESHOLD_DEG,
                       DiagnosisSettings())
     assert (said is None) if undecided is None else said.startswith(undecided), said
+
+
+def test_the_fewest_parameter_fits_start_first():
+    import dask.order
+
+    candidates = [LIBRARY[name]() for name in LIBRARY]
+    graph, order = fitting.fit_graph(candidates)
+    priority = dask.order.order(graph)
+    started = [candidates[order[list(graph).index(key)]] for key in sorted(graph, key=priority.get)]
+    counts = [len(candidate.parameters) for candidate in started]
+    assert counts == sorted(counts) and counts[0] == 1
