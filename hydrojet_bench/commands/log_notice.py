@@ -12,7 +12,7 @@ from rich.console import Console
 
 from ..data.csv_io import recorded_profile, recorded_with
 from ..data.dataset import Dataset
-from ..logs.condition import log_condition
+from ..logs.condition import incomplete_log
 from ..profile import RigProfile
 
 
@@ -24,10 +24,8 @@ def warn_if_incomplete(path: Path) -> dict[str, object] | None:
     """For a session log (.mcap) that is truncated or damaged: print what it lost and how
     many plan steps the analysis is missing, and return that for the JSON document. None
     for a whole log or another kind of input."""
-    if Path(path).suffix.lower() != ".mcap":
-        return None
-    condition = log_condition(path)
-    if condition.whole:
+    condition = incomplete_log(path)
+    if condition is None:
         return None
     _warn(condition.notice())
     return condition.as_dict()

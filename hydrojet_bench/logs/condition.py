@@ -67,3 +67,12 @@ def log_condition(path: str | Path) -> LogCondition:
         planned = steps[0].count if steps else None
     return LogCondition(Path(path), contents.truncated, contents.damage, planned, len(steps),
                         sum(step.sweep == CALIBRATION_SWEEP for step in steps))
+
+
+def incomplete_log(path: str | Path) -> LogCondition | None:
+    """The condition of a session log (.mcap) that is not whole; None for a whole log or
+    another kind of input (what every analysis warns about)."""
+    if Path(path).suffix.lower() != ".mcap":
+        return None
+    condition = log_condition(path)
+    return None if condition.whole else condition

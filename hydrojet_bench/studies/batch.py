@@ -98,14 +98,11 @@ def replay_log(task: LogTask) -> dict:
 
 
 def _log_damage(path: str) -> str | None:
-    """What a session log lacks, in one line (`LogCondition.notice`); None for a whole log
-    or a table."""
-    from ..logs.condition import log_condition
+    """What a session log lacks, in one line; None for a whole log or a table."""
+    from ..logs.condition import incomplete_log
 
-    if Path(path).suffix.lower() != ".mcap":
-        return None
-    condition = log_condition(path)
-    return None if condition.whole else condition.notice()
+    condition = incomplete_log(path)
+    return None if condition is None else condition.notice()
 
 
 def _one_line(error: Exception) -> str:
