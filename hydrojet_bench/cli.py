@@ -22,7 +22,7 @@ from rich.markup import escape
 from . import __version__
 from .commands import render
 from .errors import ConvergenceError, UserError
-from .files import check_writable_target
+from .files import check_folder_target, check_writable_target
 
 # Order is the order shown in --help.
 COMMAND_MODULES = ("run", "replay", "sensors", "simulate", "calibrate", "compare", "diagnose", "study", "batch",
@@ -71,6 +71,8 @@ def main(argv: list[str] | None = None) -> int:
         if isinstance(json_path, Path) and str(json_path) != render.STDOUT:
             # Said now, not after the minutes of work whose figures it would hold.
             check_writable_target(json_path, "JSON figures", overwrite=True)
+        if isinstance(report := getattr(args, "report", None), Path):
+            check_folder_target(report, "report folder")
         return int(args.func(args) or 0)
     except UserError as error:
         _print_error(str(error))

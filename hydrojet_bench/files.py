@@ -39,6 +39,18 @@ def check_writable_target(path: Path, what: str, *, overwrite: bool) -> None:
         raise refuse_existing(path, what)
 
 
+def check_folder_target(folder: Path, what: str) -> None:
+    """Refuse, with one line, a ``folder`` to write into that could not be created or
+    written: an existing file there or above it, or a nearest existing folder this user
+    may not write into. Said before the work (a session, a diagnosis), not after it."""
+    folder = Path(folder)
+    existing = next(p for p in (folder, *folder.parents) if p.exists())
+    if not existing.is_dir():
+        raise UserError(f"cannot create {what} {folder}: {existing} is a file, not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise UserError(f"cannot create {what} {folder}: {existing} is not writable")
+
+
 def check_replaceable(path: Path, what: str, of_its_kind: Callable[[bytes], bool]) -> None:
     """Refuse, with one line, to replace an existing ``path`` whose first bytes are not
     ``of_its_kind``: a derived output (a parameter file, a JSON document) replaces an

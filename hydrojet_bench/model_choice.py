@@ -61,6 +61,29 @@ class ModelChoice:
         check_values_for(self.model.effects, self.parameter_file.parameters, f"{self.parameter_path}: parameters.")
         return self.parameter_file.apply(nominal, self.parameter_path)
 
+    def uncalibrated(self) -> tuple[str, ...]:
+        """What runs without the parameter file having calibrated it, one sentence each: a
+        ``--model`` other than the file's, an effect (added by ``--effect``, or listed by a
+        hand-edited file) whose values the file lacks, so that they stay at their no-effect
+        defaults. Gravity is exempt: every model has it at its nominal weight unless a
+        calibration fitted it. Empty without a parameter file."""
+        if self.parameter_file is None:
+            return ()
+        path, file = self.parameter_path, self.parameter_file
+        notes = []
+        if self.model.name != file.model:
+            notes.append(f"{path} was calibrated for the {file.model} model; the {self.model.name} model runs "
+                         f"with its values, uncalibrated (calibrate with --model {self.model.name})")
+        for effect in self.model.effects:
+            names = qualified_parameter_names(effect)
+            missing = [name for name in names if name not in file.parameters]
+            if effect.name == "gravity" or not missing:
+                continue
+            which = "has no values" if len(missing) == len(names) else f"lacks {', '.join(missing)}"
+            notes.append(f"effect {effect.name} {which} in {path}: it runs at its defaults, uncalibrated "
+                         f"(calibrate with --effect {effect.name} to fit it)")
+        return tuple(notes)
+
 
 def build_model(name: str, effect_specs: Sequence[str]) -> tuple[ShootingModel, tuple[Effect, ...]]:
     """The model with gravity plus the requested effects, and the requested effects

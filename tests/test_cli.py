@@ -133,10 +133,14 @@ def test_a_missing_estimator_effect_names_the_profile(tmp_path, capsys):
 def test_the_physical_rig_profile_without_its_i2c_bus_is_one_line(tmp_path, capsys):
     plan = tmp_path / "plan.toml"
     plan.write_text(TWO_STEPS)
-    message = one_line_error(capsys, ["run", "--profile", "hydrojet-v1", "--plan", str(plan), "--no-live",
-                                      "--log", str(tmp_path / "x.mcap")])
+    command = ["run", "--profile", "hydrojet-v1", "--plan", str(plan), "--no-live", "--log", str(tmp_path / "x.mcap")]
+    message = one_line_error(capsys, command)
     assert message.endswith("hydrojet-v1.toml: transports.imu_bus = 1: cannot open /dev/i2c-1: No such file or "
-                            "directory (is this the rig's PC? imu_bus = \"sim\" emulates the IMUs)"), message
+                            "directory (is this the rig's PC? imu_bus = \"sim\" emulates the IMUs) (nothing was "
+                            "measured: no log kept)"), message
+    # No log of the request alone stands in the way of the retry.
+    assert not (tmp_path / "x.mcap").exists()
+    assert "cannot open /dev/i2c-1" in one_line_error(capsys, command)
 
 
 def test_calibrate_without_calibration_poses_says_so(tmp_path, capsys):
@@ -210,3 +214,16 @@ def test_simulate_plays_the_paper_protocol_within_the_profiles_valves(tmp_path, 
     assert "ask more than the valves give (0.05, 0.05, 0.05 N per jet)" in err
     assert f"({profile}: [jets] max_force_n)" in err
     assert read_csv(table, load_profile(profile)).jet_forces_n.max() == pytest.approx(0.05)
+
+
+@pytest.mark.parametrize("command", [["run", "--plan", "calibration", "--no-live"],
+                                     ["compare", "x.csv", "--params", "p.toml"], ["diagnose", "x.csv"],
+                                     ["replay", "x.mcap"], ["sensors", "x.mcap"]])
+def test_a_report_folder_that_cannot_be_made_is_refused_before_the_work(tmp_path, capsys, command):
+    blocker = tmp_path / "figures"
+    blocker.write_text("not a folder")
+    log = tmp_path / "run.mcap"
+    extra = ["--log", str(log)] if command[0] == "run" else []
+    message = one_line_error(capsys, [*command, *extra, "--report", str(blocker / "report")])
+    assert message == f"cannot create report folder {blocker / 'report'}: {blocker} is a file, not a folder"
+    assert not log.exists()  # the session never started

@@ -265,27 +265,35 @@ class Session:
         completed = 0
         # The profile's flush period is session time, like its other times; the writer counts wall time.
         flush_interval_wall_s = request.settings.session.flush_interval_s / self.clock.time_scale
-        with LogWriter(request.log_path, metadata=metadata, flush_interval_s=flush_interval_wall_s,
-                       overwrite=request.overwrite_log, listener=self.on_log_message,
-                       reorder_window_s=REORDER_WINDOW_WALL_S * self.clock.time_scale, background=True) as log:
-            self._log = log
-            self._write_parameters()
-            for warning in request.warnings:
-                self.event("warning", "plan", warning)
-            try:
-                completed = await self._run_devices()
-            except asyncio.CancelledError:
-                self.event("warning", "session", "interrupted: valves closed, log finished")
+        try:
+            with LogWriter(request.log_path, metadata=metadata, flush_interval_s=flush_interval_wall_s,
+                           overwrite=request.overwrite_log, listener=self.on_log_message,
+                           reorder_window_s=REORDER_WINDOW_WALL_S * self.clock.time_scale, background=True) as log:
+                self._log = log
+                self._write_parameters()
+                for warning in request.warnings:
+                    self.event("warning", "request", warning)
+                try:
+                    completed = await self._run_devices()
+                except asyncio.CancelledError:
+                    self.event("warning", "session", "interrupted: valves closed, log finished")
+                    raise
+                except Exception as error:
+                    cause = _first_leaf(error)
+                    self.event("error", "session", f"stopped: {type(cause).__name__}: {cause}")
+                    # A twin with no equilibrium for the profile's rod is the user's inputs too.
+                    if isinstance(cause, (UserError, ConvergenceError)):
+                        raise cause from error
+                    if isinstance(cause, DEVICE_ERRORS):
+                        raise SessionAborted(f"device failure: {cause}") from error
+                    raise
+        except (UserError, ConvergenceError) as error:
+            # Devices that never opened measured nothing: a log of the request alone would
+            # only stand in the way of the retry (its path is taken).
+            if self._armed is not None:
                 raise
-            except Exception as error:
-                cause = _first_leaf(error)
-                self.event("error", "session", f"stopped: {type(cause).__name__}: {cause}")
-                # A twin with no equilibrium for the profile's rod is the user's inputs too.
-                if isinstance(cause, (UserError, ConvergenceError)):
-                    raise cause from error
-                if isinstance(cause, DEVICE_ERRORS):
-                    raise SessionAborted(f"device failure: {cause}") from error
-                raise
+            Path(request.log_path).unlink(missing_ok=True)
+            raise type(error)(f"{error} (nothing was measured: no log kept)") from error
         steps = Dataset.concatenate(self.settled_rows) if self.settled_rows else None
         armed = self._armed
         # The figures the log says; an unfinished plan's up to now.

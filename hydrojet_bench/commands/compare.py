@@ -33,7 +33,8 @@ from ..models.shooting import ShootingModel
 from . import render
 from .common import add_input_arguments, add_model_arguments, comparison_steps
 from .figure_options import add_format_argument
-from .log_notice import warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_unsettled
+from .log_notice import (warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_uncalibrated,
+                         warn_if_unsettled)
 
 LABELS = {"ref": "Ref.", "online": "Proposed"}
 BREAKDOWN_KEYS = ("by_jet", "by_direction", "by_region", "loading_unloading", "over_time", "worst_poses")
@@ -70,6 +71,8 @@ class Evaluation:
     breakdowns: dict[str, Breakdowns]
     jet_scales: dict[str, JetScale]
     as_diagnosed: ErrorSummary | None = None
+    uncalibrated: tuple[str, ...] = ()
+    training: str | None = None  # the notice when the parameters were fitted on the steps compared
 
     @property
     def label(self) -> str:
@@ -94,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
         as_diagnosed = None if before_choice is None else scored_as_diagnosed(choice.model, params, validation)
         return Evaluation(choice.parameter_path, choice.model, results,
                           {key: break_down(c, validation) for key, c in results.items()},
-                          jet_force_scales(choice.model, params, validation), as_diagnosed)
+                          jet_force_scales(choice.model, params, validation), as_diagnosed,
+                          warn_if_uncalibrated(choice), warn_if_fitted_on(choice, args.input, validation))
 
     after = evaluate(after_choice)
     before = None if before_choice is None else evaluate(before_choice)
@@ -345,7 +349,9 @@ def figures(evaluation: Evaluation, steps: Dataset) -> dict:
         document["as_diagnosed"] = {**evaluation.as_diagnosed.as_dict(),
                                     "gravity": "the steps' mean when the base is static, as diagnose scores"}
     document["parameters"] = {"file": str(evaluation.source), "model": evaluation.model.name,
-                              "effects": [effect.name for effect in evaluation.model.effects]}
+                              "effects": [effect.name for effect in evaluation.model.effects],
+                              "uncalibrated": list(evaluation.uncalibrated),
+                              "held_out": evaluation.training is None, "training_notice": evaluation.training}
     return document
 
 

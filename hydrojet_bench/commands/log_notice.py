@@ -2,17 +2,22 @@
 standard error and a field of their JSON documents: a session log that is cut or
 damaged (``log_damage``), a CSV table read with the default profile although
 another one wrote it (``profile_mismatch``), and steps of a single sample, which are no
-settled equilibria (``single_sample_steps``)."""
+settled equilibria (``single_sample_steps``); and of a parameter file, what of the model it did
+not calibrate (`ModelChoice.uncalibrated`) and whether it was fitted on the steps
+compared (`warn_if_fitted_on`)."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from rich.console import Console
 
 from ..data.csv_io import recorded_profile, recorded_with
 from ..data.dataset import Dataset
+from ..estimation.calibration import ALL_ROWS, CALIBRATION_POSES, SWEEPS
 from ..logs.condition import incomplete_log
+from ..model_choice import ModelChoice
 from ..profile import RigProfile
 
 
@@ -63,3 +68,48 @@ def warn_if_unsettled(path: Path, steps: Dataset, log_damage: dict[str, object] 
           "row), so they are no settled equilibria, and the quasistatic models take a rod still moving "
           "for model error: label the settled rows (sweep and step columns) or hold each command longer")
     return {"count": single, "steps": len(steps)}
+
+
+def warn_if_uncalibrated(choice: ModelChoice) -> tuple[str, ...]:
+    """Print what of ``choice``'s model its parameter file did not calibrate (a model or an
+    effect it was not fitted for) and return it for the JSON document."""
+    notes = choice.uncalibrated()
+    for note in notes:
+        _warn(note)
+    return notes
+
+
+def warn_if_fitted_on(choice: ModelChoice, path: Path, validation: Dataset) -> str | None:
+    """When ``choice``'s parameter file was calibrated on ``path`` itself (its
+    ``[calibration] data``) and on the rows compared (``validation``: the sweeps, or every
+    step when there are none): print that the errors are training errors and return it
+    for the JSON document. None when they are held out or the file does not say."""
+    calibration = {} if choice.parameter_file is None else choice.parameter_file.calibration
+    data, fit_on = calibration.get("data"), calibration.get("fit_on")
+    if not isinstance(data, str) or not _same_file(data, path, Path(choice.parameter_path or ".")):
+        return None
+    if (validation.sweep >= 0).any():
+        if fit_on not in (SWEEPS, ALL_ROWS):
+            return None
+        what = "the sweep steps compared were fitted"
+    elif fit_on in (CALIBRATION_POSES, ALL_ROWS):
+        what = "it has no sweeps (sweep >= 0), so the steps compared are the calibration poses fitted"
+    else:
+        return None
+    text = (f"{choice.parameter_path} was calibrated on {path} (fit_on {fit_on}): {what}, so these are "
+            "training errors, not held-out ones")
+    _warn(text)
+    return text
+
+
+def _same_file(recorded: str, path: Path, parameter_path: Path) -> bool:
+    """Whether ``recorded`` (a data path as `calibrate` was given it: relative to the folder
+    it ran in, which is unknown, so tried from here and from the parameter file's folder)
+    names ``path``."""
+    for candidate in (Path(recorded), parameter_path.parent / recorded):
+        try:
+            if os.path.samefile(candidate, path):
+                return True
+        except OSError:
+            continue
+    return False

@@ -117,7 +117,9 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
     request = SessionRequest(profile=profile, settings=settings, plan=plan, log_path=log_path, model=model,
                              effects=choice.effect_specs, params=choice.parameters(profile.model_parameters()),
                              calibrate=not args.no_calibration, calibration_names=choice.calibration_names,
-                             seed=args.seed, warnings=(clip_warning,) if clip_warning else (),
+                             seed=args.seed, warnings=((clip_warning,) if clip_warning else ())
+                             # The session's own calibration fits what the file did not.
+                             + (choice.uncalibrated() if args.no_calibration else ()),
                              command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]), overwrite_log=overwrite,
                              setup_checks=not args.skip_checks)
     console = render.console_for(args)

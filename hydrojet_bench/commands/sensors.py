@@ -32,7 +32,7 @@ from ..model_choice import ModelDefaults, model_choice
 from . import render
 from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
-from .log_notice import warn_if_incomplete
+from .log_notice import warn_if_incomplete, warn_if_uncalibrated
 
 # The longest EM gap --max-gap may bridge, s. A slerp across a gap assumes the tip turned
 # steadily in between; a minute already spans twelve of the paper's 5 s steps and three
@@ -120,6 +120,7 @@ def estimate(args: argparse.Namespace, em: Dataset, imu: Dataset, bench: dict[st
     if args.params is not None:
         params = choice.parameters(base)
         origin = f"parameters from {args.params}"
+        warn_if_uncalibrated(choice)
     else:
         poses = em_steps.calibration_rows().valid_rows()
         if len(poses) == 0:

@@ -126,3 +126,48 @@ def test_a_parameter_file_carries_its_file_effect_relative_to_itself(calibrated,
     assert str(moved) in message and "clogged_jet.py does not exist" in message
     assert main(["compare", str(data), "--params", str(after), "--baseline", str(folder / "none.toml")]) == 2
     assert "no such parameter file" in capsys.readouterr().err
+
+
+def test_what_the_parameters_did_not_calibrate_is_said(calibrated, capsys, tmp_path):
+    """An effect added at its defaults, another model, a hand-edited file without an
+    effect's values, parameters fitted on the very steps compared: each is a warning and
+    a field of the JSON document; held-out figures from a file fitted elsewhere say so."""
+    folder, data, before, _ = calibrated
+    capsys.readouterr()
+
+    def compare(*options: str) -> tuple[dict, str]:
+        out = tmp_path / "figures.json"
+        assert main(["compare", str(data), "--json", str(out), *options]) == 0
+        return json.loads(out.read_text())["parameters"], capsys.readouterr().err
+
+    parameters, warnings = compare("--params", str(before))
+    assert parameters["uncalibrated"] == [] and parameters["held_out"] is True and "warning" not in warnings
+
+    parameters, warnings = compare("--params", str(before), "--effect", "jet_gain", "--model", "prb")
+    assert len(parameters["uncalibrated"]) == 2
+    assert f"{before} was calibrated for the cosserat model; the prb model runs with its values" in warnings
+    assert f"effect jet_gain has no values in {before}: it runs at its defaults" in " ".join(warnings.split())
+
+    edited = tmp_path / "edited.toml"
+    edited.write_text(before.read_text().replace('effects = ["gravity"]', 'effects = ["gravity", "jet_gain"]')
+                      .replace("[standard_errors]", '"jet_gain.gain_2" = 0.7\n\n[standard_errors]'))
+    parameters, warnings = compare("--params", str(edited))
+    assert parameters["uncalibrated"] == [f"effect jet_gain lacks jet_gain.gain_1, jet_gain.gain_3 in {edited}: it "
+                                          "runs at its defaults, uncalibrated (calibrate with --effect jet_gain to "
+                                          "fit it)"]
+
+    # Without sweeps every step is compared: the poses a calibration on this table fitted.
+    profile = load_profile("sim")
+    twin = DigitalTwin(TwinConfig.from_profile(profile, seed=5))
+    poses = tmp_path / "poses.csv"
+    write_csv(twin.run_plan(calibration_plan(12, seed=5), record_window_s=1.0).to_dataset(profile, "poses"), poses)
+    fitted = tmp_path / "fitted.toml"
+    assert main(["calibrate", str(poses), "-o", str(fitted)]) in (0, 3)
+    capsys.readouterr()
+    out = tmp_path / "training.json"
+    assert main(["compare", str(poses), "--params", str(fitted), "--json", str(out)]) == 0
+    parameters = json.loads(out.read_text())["parameters"]
+    warnings = " ".join(capsys.readouterr().err.split())
+    assert parameters["held_out"] is False and parameters["training_notice"] in warnings
+    assert f"{fitted} was calibrated on {poses} (fit_on calibration): it has no sweeps" in warnings
+    assert "training errors, not held-out ones" in warnings
