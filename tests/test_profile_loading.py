@@ -120,7 +120,9 @@ offset_in_tip_m = [0.0, 0.0, 0.01]
         (MINIMAL + "[jets]\nmax_force_n = 0\n", "jets.max_force_n", "a finite number > 0 or a list"),
         (MINIMAL + "[jets]\nmax_force_n = [0.1, -0.1, 0.1]\n", "jets.max_force_n[1]", "> 0, got -0.1"),
         (MINIMAL + "[jets]\nmax_force_n = [0.1, 0.1]\n", "jets.max_force_n", "a number or a list of 3"),
-        (MINIMAL + "[jets]\nring_angle_deg = true\n", "jets.ring_angle_deg", "must be a finite number, got True"),
+        (MINIMAL + "[jets]\nring_angle_deg = true\n", "jets.ring_angle_deg", "must be a number >= -360 and <= 360, "
+                                                                          "got True"),
+        (MINIMAL + "[jets]\nring_angle_deg = 1e300\n", "jets.ring_angle_deg", "<= 360, got 1e+300"),
         (MINIMAL + "[base]\norientation_in_tracker = [1, 1, 0, 0]\n", "base.orientation_in_tracker",
          "unit quaternion"),
         (MINIMAL + "[base_sensor]\nrotation_in_base = [1, 0, 0]\n", "base_sensor.rotation_in_base",
@@ -323,3 +325,10 @@ def test_a_profile_that_is_not_utf8_is_one_line_naming_it(tmp_path: Path) -> Non
     path.write_bytes(MINIMAL.encode() + "# réglé\n".encode("latin-1"))
     with pytest.raises(UserError, match=rf"^{path}: not UTF-8 text \(byte \d+\); save it as UTF-8$"):
         load_profile(path)
+
+
+def test_a_profile_with_a_byte_order_mark_loads_as_without(tmp_path: Path) -> None:
+    """Some Windows editors start UTF-8 files with a byte-order mark; TOML has none."""
+    marked = tmp_path / "marked.toml"
+    marked.write_bytes(b"\xef\xbb\xbf" + (MINIMAL + "[jets]\nring_angle_deg = 5.0\n").encode())
+    assert load_profile(marked).config.jets.ring_angle_deg == 5.0

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..errors import UserError
 from ..logs import recover_log, recovered_path
 from . import render
 
@@ -26,6 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.input.is_file() and args.input.stat().st_size == 0:
+        raise UserError(f"{args.input}: empty file (0 bytes): nothing to recover (a session that stopped before "
+                        "writing anything, or not a session log)")
     output = args.output or recovered_path(args.input)
     report = recover_log(args.input, output, overwrite=args.overwrite)
     if report.first_t_s is None or report.last_t_s is None:

@@ -26,8 +26,8 @@ def read_toml(path: Path, what: str = "file") -> dict[str, Any]:
     """A TOML file's document; unreadable or malformed files are `UserError`s (``what``
     the file is names a missing one)."""
     try:
-        with path.open("rb") as handle:
-            return tomllib.load(handle)
+        # A byte-order mark (some Windows editors write one) is no TOML; CSV inputs allow it too.
+        return tomllib.loads(path.read_bytes().decode("utf-8").removeprefix("\ufeff"))
     except FileNotFoundError:
         raise UserError(f"{path}: no such {what}") from None
     except tomllib.TOMLDecodeError as error:

@@ -201,7 +201,8 @@ class CapsuleTable(Table, kw_only=True):
 
 class JetsTable(Table, kw_only=True):
     # Rotation of the jet ring about the tip z axis, deg; 0 is exactly the paper's eq. 5.
-    ring_angle_deg: Finite = math.degrees(JetLayout().ring_angle_rad)
+    # One turn either way covers every ring; past it, a unit slip (radians read as deg?).
+    ring_angle_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)] = math.degrees(JetLayout().ring_angle_rad)
     # Largest force of each jet, N: one number for all, or one per jet. Commands beyond it
     # are clipped by the valves.
     max_force_n: Positive | tuple[Positive, ...] = DEFAULT_MAX_JET_FORCE_N

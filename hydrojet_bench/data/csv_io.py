@@ -10,7 +10,7 @@ The CSV contract (stable: change it only by adding optional columns)
 * Required columns:
 
   ========================================  =====================================
-  ``t``                                     time, s; must not go backwards
+  ``t``                                     time, s; increasing row to row
   ``q1``, ``q2``, ``q3``                    commanded jet forces, N, >= 0
   ``base_qw, base_qx, base_qy, base_qz``    base sensor orientation, tracker frame
   ``tip_qw, tip_qx, tip_qy, tip_qz``        tip sensor orientation, tracker frame
@@ -309,15 +309,20 @@ class _BlockReader:
             orientations[sensor] = q
         time = values["t"]
         before = self.previous.time_s[-1:] if self.previous is not None else time[:0]
-        backwards = np.flatnonzero(np.diff(np.concatenate([before, time])) < 0.0) + 1 - len(before)
-        if len(backwards):
-            i = int(backwards[0])
+        # A repeated time is a duplicated row, or a table without real times: either way
+        # the steps' settled windows (their last second) would be wrong without a word.
+        steps_s = np.diff(np.concatenate([before, time]))  # steps_s[k] leads to row k + 1 - len(before)
+        not_forward = np.flatnonzero(steps_s <= 0.0)
+        if len(not_forward):
+            i = int(not_forward[0]) + 1 - len(before)
             if i > 0:
                 earlier, earlier_line = cell(i - 1, "t"), line_numbers[i - 1]
             else:
                 earlier = _fields(_line(self.path, self.previous_line))[order["t"]].strip()
                 earlier_line = self.previous_line
-            problem.offer(first_row + i, order["t"], f"{where(i, 't')}: time goes backwards ({cell(i, 't')} s "
+            went = ("goes backwards" if steps_s[not_forward[0]] < 0.0
+                    else "does not advance (a repeated row? each row is one sample at its own time)")
+            problem.offer(first_row + i, order["t"], f"{where(i, 't')}: time {went} ({cell(i, 't')} s "
                                                      f"after {earlier} s on line {earlier_line})")
         rows = len(time)
         sweep = values.get("sweep", np.full(rows, -1, dtype=np.int64))

@@ -101,6 +101,7 @@ def test_forces_above_the_profile_limit_are_flagged_not_dropped(tmp_path: Path) 
         (set_cell(2, "tip_qw", "1.1"), 6, "tip_qw,tip_qx,tip_qy,tip_qz", "not a unit quaternion"),
         (set_cell(0, "base_qx", "0.5"), 4, "base_qw,base_qx,base_qy,base_qz", "not a unit quaternion"),
         (set_cell(2, "t", "0.4"), 6, "t", "time goes backwards (0.4 s after 0.5 s on line 5)"),
+        (table(ROWS[:2] + ROWS[1:]), 6, "t", "time does not advance (a repeated row?"),
         (set_cell(1, "sweep", "1.5"), 5, "sweep", "is not an integer"),
         (set_cell(1, "sweep", "-2"), 5, "sweep", "-1 for calibration"),
         (set_cell(3, "q1", "-0.01"), 7, "q1", "a jet cannot pull"),
@@ -112,7 +113,7 @@ def test_forces_above_the_profile_limit_are_flagged_not_dropped(tmp_path: Path) 
     ],
     ids=["missing-required", "unknown", "duplicate", "partial-triplet-header", "empty-cell",
          "partial-triplet-row", "short-row", "long-row", "non-numeric", "nan-quaternion", "inf-time",
-         "non-unit-tip", "non-unit-base", "time-backwards", "fractional-sweep", "sweep-below-minus-one",
+         "non-unit-tip", "non-unit-base", "time-backwards", "repeated-row", "fractional-sweep", "sweep-below-minus-one",
          "negative-force", "late-comment", "digit-separator", "absurd-force", "absurd-position",
          "time-in-milliseconds"],
 )
@@ -256,7 +257,7 @@ def stepped_datasets(draw: st.DrawFn) -> Dataset:
     forces = np.concatenate([np.tile([force, 0.0, 0.01], (rows, 1)) for rows, _, force in runs])
     n = len(forces)
     tip = np.array(draw(st.lists(unit_quaternion, min_size=n, max_size=n)))
-    return Dataset(time_s=np.cumsum(draw(st.lists(st.sampled_from([0.0, 0.3, 0.7]), min_size=n, max_size=n))),
+    return Dataset(time_s=np.cumsum(draw(st.lists(st.sampled_from([0.01, 0.3, 0.7]), min_size=n, max_size=n))),
                    jet_forces_n=forces, base_orientation=np.tile([0.0, 1.0, 0.0, 0.0], (n, 1)), tip_orientation=tip,
                    tip_position_m=np.array(draw(st.lists(st.tuples(position, position, position), min_size=n,
                                                          max_size=n))),
