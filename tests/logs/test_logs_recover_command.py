@@ -35,6 +35,11 @@ def test_recover_refuses_what_is_not_a_log(tmp_path: Path, capsys) -> None:
     error = " ".join(capsys.readouterr().err.split())  # the CLI's console wraps long lines
     assert "notes.mcap: not an MCAP file" in error
     assert not (tmp_path / "notes.recovered.mcap").exists()
+    empty = tmp_path / "empty.mcap"
+    empty.touch()
+    assert main(["recover", str(empty)]) == 2
+    assert "empty.mcap: empty file (0 bytes): nothing to recover" in " ".join(capsys.readouterr().err.split())
+    assert not (tmp_path / "empty.recovered.mcap").exists()
 
 
 def test_recover_keeps_the_chunks_after_a_damaged_one_and_says_what_was_lost(tmp_path: Path, capsys) -> None:
