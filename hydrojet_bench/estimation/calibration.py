@@ -68,6 +68,9 @@ NEGLIGIBLE_RESIDUAL_RAD = np.radians(1e-2)
 # A fitted value within this share of its bounds' span (of their logarithms, for bounds
 # three or more decades apart) from a bound sits on it.
 BOUND_SHARE = 1e-3
+# `CalibrationResult.off_branch`: the poses solved afresh at the result cost more than this
+# times what the fit reached (one equilibrium found twice costs the same to 1e-10).
+OFF_BRANCH_COST_RATIO = 1.5
 DEFAULT_POSITION_WEIGHT_RAD_PER_M = 10.0
 
 
@@ -98,8 +101,14 @@ class CalibrationResult:
     result: zero at an optimum, bounds respected. stop_reason: why the fit stopped.
     relative_gradient: the same gradient of chi^2 (the residual variance, or
     ``variance_floor`` if larger, as the noise); converged: it is at most
-    `GRADIENT_TOLERANCE`. at_bound: fitted parameters that sit on a bound other than their
-    no-effect default (`BOUND_SHARE`): the data push them past the range they may take."""
+    `GRADIENT_TOLERANCE` and the fit is not `off_branch`. at_bound: fitted parameters that
+    sit on a bound other than their no-effect default (`BOUND_SHARE`): the data push them
+    past the range they may take. The errors after are those of the poses solved afresh
+    at the result (from the straight rod, in the poses' order), as every prediction
+    solves them. off_branch: there they settle on other equilibria than the fit followed
+    from evaluation to evaluation, and fit the data far worse than the fit saw
+    (`rms_orientation_deg_followed`), or cannot be solved: the optimum is one the rod
+    does not reach."""
 
     params: ModelParameters
     names: tuple[str, ...]
@@ -115,13 +124,25 @@ class CalibrationResult:
     relative_gradient: float = float("nan")
     converged: bool = False
     at_bound: tuple[str, ...] = ()
+    off_branch: bool = False
+    rms_orientation_deg_followed: float | None = None
+
+    @property
+    def branch_note(self) -> str:
+        """For an `off_branch` fit, what a fresh solve found, in words ("; ..."); else ""."""
+        if not self.off_branch:
+            return ""
+        fresh = ("a fresh solve fails" if self.rms_orientation_deg_followed is None else
+                 f"solved afresh, the poses settle on other equilibria than the fit followed (RMS "
+                 f"{self.rms_orientation_deg_after:.2f} deg where the fit saw {self.rms_orientation_deg_followed:.2f})")
+        return f"; {fresh}: the rod does not reach this optimum"
 
     @property
     def convergence(self) -> str:
         """Whether the fit converged and why, in words."""
         verdict = "converged" if self.converged else "NOT converged"
         return (f"{verdict}: {self.stop_reason} after {self.evaluations} evaluations, scaled gradient "
-                f"{self.relative_gradient:.2g} (tolerance {GRADIENT_TOLERANCE:g})")
+                f"{self.relative_gradient:.2g} (tolerance {GRADIENT_TOLERANCE:g}){self.branch_note}")
 
 
 DEFAULT_NAMES = PARAMETER_NAMES  # E0, EL, L and the six components of w_d: nine parameters
@@ -192,8 +213,12 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
     cache: dict[bytes, tuple[np.ndarray, list[Solution], list[ModelParameters]]] = {}
     # Each pose's solution at the last evaluated parameters: the optimiser moves them a
     # little per evaluation, so they seed the next solves far better than the previous
-    # pose (other jet forces) does.
+    # pose (other jet forces) does. On a rod with several equilibria they may carry the
+    # poses onto a branch no fresh solve reaches: the fit's end checks that.
     last: list[Solution | None] = [None] * len(poses)
+    # Set after a fit that ended off its branch (`CalibrationResult.off_branch`): then
+    # every evaluation solves afresh, as predictions do, at the cost of slower solves.
+    fresh_only = [False]
     unsolved_steps = [0]
 
     def parameters_at(x: np.ndarray) -> list[ModelParameters]:
@@ -222,7 +247,8 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         key = x.tobytes()
         if key not in cache:
             params = parameters_at(x)
-            solutions = solve_poses(range(len(poses)), params, last, follow_path)
+            solutions = solve_poses(range(len(poses)), params, [None] * len(poses) if fresh_only[0] else last,
+                                    follow_path)
             last[:] = solutions
             residuals = residual_rows([solutions[index] for index in fitted_indices]).ravel()
             cache.clear()  # only the latest point is asked for again (by the Jacobian)
@@ -324,16 +350,49 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
     # path (diagnosis fits, sweeps) trust region reflective stays: there a clamp's play
     # makes the cost piecewise smooth, and dogbox left such a fit unconverged after 115
     # evaluations where trust region reflective converged.
+    def least_squares_fit():
+        return least_squares(lambda z: residual((z + offset) * scales), np.ones(len(names)),
+                             jac=scaled_jacobian, method="trf" if follow_path else "dogbox",
+                             bounds=scaled_bounds, max_nfev=max_evaluations, xtol=1e-10, ftol=cost_tolerance,
+                             gtol=1e-10, callback=None if gradient_tolerance is None else stop_at_gradient)
+
+    def fresh_residuals(values: np.ndarray) -> np.ndarray | None:
+        """The residuals at ``values`` solved afresh (None when a solve fails)."""
+        try:
+            solutions = solve_poses(range(len(poses)), parameters_at(values), [None] * len(poses), follow_path)
+        except ConvergenceError:
+            return None
+        return residual_rows([solutions[index] for index in fitted_indices]).ravel()
+
+    def off_its_branch(fitted: np.ndarray, fresh: np.ndarray | None) -> bool:
+        # A margin of the noise variance per residual keeps noise-level differences
+        # (another solver path to one equilibrium) from counting.
+        return fresh is None or float(fresh @ fresh) > (OFF_BRANCH_COST_RATIO * float(fitted @ fitted) + fresh.size
+                                                        * max(variance_floor, NEGLIGIBLE_RESIDUAL_RAD**2))
+
     try:
         before = residual(start)
-        fit = least_squares(lambda z: residual((z + offset) * scales), np.ones(len(names)), jac=scaled_jacobian,
-                            method="trf" if follow_path else "dogbox",
-                            bounds=scaled_bounds, max_nfev=max_evaluations, xtol=1e-10, ftol=cost_tolerance,
-                            gtol=1e-10, callback=None if gradient_tolerance is None else stop_at_gradient)
+        fit = least_squares_fit()
     except ConvergenceError as error:
         raise ConvergenceError(f"calibration stopped: a model solve failed ({error})") from error
+    evaluations = int(fit.nfev)
     values = (fit.x + offset) * scales
-    final = residual(values)
+    # The result's errors are those of the poses solved afresh, as every prediction will
+    # solve them, not those the fit saw along its history of seeds.
+    fresh = fresh_residuals(values)
+    off_branch = off_its_branch(fit.fun, fresh)
+    refitted = ""
+    if off_branch:
+        # Again from the start, every evaluation solved afresh: the optimum predictions reach.
+        fresh_only[0] = True
+        cache.clear()
+        fit = least_squares_fit()
+        evaluations += int(fit.nfev)
+        values = (fit.x + offset) * scales
+        fresh = fresh_residuals(values)
+        off_branch = off_its_branch(fit.fun, fresh)
+        refitted = "; refitted solving every pose afresh (the first fit followed equilibria the rod does not reach)"
+    final = fit.fun if fresh is None else fresh
     dof = max(final.size - len(names), 1)
     variance = float(final @ final) / dof
     # In scaled variables: the raw columns span ~15 decades (rad per Pa vs per N m), and
@@ -357,13 +416,16 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         unidentifiable=unidentifiable,
         rms_orientation_deg_before=_rms_angle_deg(before, rows_per_pose),
         rms_orientation_deg_after=_rms_angle_deg(final, rows_per_pose),
-        evaluations=int(fit.nfev),
+        evaluations=evaluations,
         scaled_gradient_norm=gradient,
         stop_reason=_STOP_REASONS.get(fit.status, fit.message) + (
             f"; {unsolved_steps[0]} trial step(s) the model could not solve were shortened"
-            if unsolved_steps[0] else ""),
+            if unsolved_steps[0] else "") + refitted,
         relative_gradient=relative_gradient,
-        converged=bool(relative_gradient <= GRADIENT_TOLERANCE),
+        converged=bool(relative_gradient <= GRADIENT_TOLERANCE) and not off_branch,
+        off_branch=off_branch,
+        rms_orientation_deg_followed=_rms_angle_deg(fit.fun, rows_per_pose) if off_branch and fresh is not None
+        else None,
         at_bound=tuple(name for name, value, lower, upper in zip(names, values, *bounds)
                        if on_bound(value, lower, upper, _default(model, name))),
     )

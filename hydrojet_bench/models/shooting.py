@@ -9,9 +9,9 @@ unknown is the tip orientation (three numbers); the tip wrench follows from it a
 residual is the clamp's orientation error (`hydrojet_bench.models.kernels`).
 
 A solve is warm-started from a nearby `Solution` when one is given (its tip orientation
-and its solver matrix), and falls back to load ramping (continuation from the straight
-rod) for cold starts that fail and for bends past 150 degrees, where a direct cold
-shot may land on another equilibrium branch. When nothing converges it raises
+and its solver matrix). A cold start is checked against load ramping (continuation from
+the straight rod), whose equilibrium it keeps when the two differ: a direct cold shot
+may land on another equilibrium branch, one that no loading of the rod reaches. When nothing converges it raises
 `ConvergenceError`: a model never returns an unconverged shape.
 """
 
@@ -43,6 +43,9 @@ DEFAULT_MAX_ITERATIONS = 40
 # follows the physical branch.
 RAMP_BEND_DEG = 150.0
 RAMP_SCHEDULES = (4, 16)
+# Two converged solves (residual 1e-10) whose tip orientations differ by more than this
+# are different equilibria, not one found twice.
+SAME_EQUILIBRIUM_RAD = 1e-6
 # Past a fold of the load path (a soft tip under gravity and a large jet force) the
 # branch that continuation follows ends and the rod snaps to a more bent one, which
 # Newton started on the near side cannot reach: the last resort starts further along
@@ -397,7 +400,7 @@ class ShootingModel:
         if self._run(prepared, prepared.jet_forces_n, np.eye(3), 1.0, work):
             solution = self.solution_from(prepared, work)
             if solution.bend_angle_deg <= RAMP_BEND_DEG:
-                return solution
+                return self._on_loading_branch(prepared, solution)
         nearest = [] if warm_start is None else [warm_start.tip_rotation_in_base]
         for stages in RAMP_SCHEDULES:
             ramped, last_solved = self._ramp(prepared, stages, work)
@@ -596,6 +599,18 @@ class ShootingModel:
             last_solved = work.reference.copy()
             rotation, jacobian = work.reference, work.jacobian
         return self.solution_from(prepared, work), None
+
+    def _on_loading_branch(self, prepared: PreparedProblem, direct: Solution) -> Solution:
+        """``direct``, a cold shot's equilibrium, or the one that load ramping from the
+        straight rod reaches when they differ. Under a large tip load (a heavy capsule on a
+        soft horizontal rod, a compressive w_d) there may be several equilibria, and the
+        straight seed can land on one that no loading of the rod leads to (c. 110 deg of
+        bend where ramping and the rig give 80): every later warm start would follow it."""
+        ramped, _ = self._ramp(prepared, RAMP_SCHEDULES[0], self.workspace(prepared))
+        if ramped is None:
+            return direct
+        turn = so3_log(direct.tip_rotation_in_base.T @ ramped.tip_rotation_in_base)
+        return direct if float(np.linalg.norm(turn)) < SAME_EQUILIBRIUM_RAD else ramped
 
     def _snap(self, prepared: PreparedProblem, nearest: Sequence[np.ndarray], work: Workspace) -> Solution | None:
         """Full load, started from each of the ``nearest`` solved tip orientations turned

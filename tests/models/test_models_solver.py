@@ -15,7 +15,8 @@ from hydrojet_bench.errors import ConvergenceError
 from hydrojet_bench.geometry import adjoint, se3, so3_exp, so3_log
 from hydrojet_bench.models import CosseratModel, PrbModel, make_model, shooting
 from hydrojet_bench.effects.problem import RodProblem
-from hydrojet_bench.params import DisturbanceWrench, ModelParameters, RodParameters, with_parameters
+from hydrojet_bench.params import (CapsuleParameters, DisturbanceWrench, ModelParameters, RodParameters,
+                                   with_parameters)
 
 ACROSS = ModelParameters(gravity_in_base_m_s2=(-9.81, 0.0, 0.0))
 MODELS = [CosseratModel(), PrbModel()]
@@ -90,6 +91,37 @@ def test_past_a_fold_of_the_load_path_the_solver_finds_the_branch_the_rod_snaps_
     monkeypatch.setattr(shooting, "SNAP_TURNS_DEG", ())
     with pytest.raises(ConvergenceError, match="past a fold"):
         PrbModel().solve(FOLD_JETS_N, FOLD)
+
+
+# A heavy capsule on a soft-tipped rod held across gravity, under a large compressive w_d
+# (where a calibration of such a rod wandered): several equilibria for one load.
+HEAVY = ModelParameters(
+    rod=RodParameters(length_m=0.068861, radius_m=0.0045, youngs_modulus_base_pa=535249.0,
+                      youngs_modulus_tip_pa=75097.0),
+    capsule=CapsuleParameters(mass_kg=0.0095),
+    disturbance=DisturbanceWrench(force_n=(-0.0498, -0.0039, 0.31), moment_nm=(-7.5e-05, 3.68e-04, -3.5e-05)),
+    gravity_in_base_m_s2=(-9.81, 0.0, 0.0))
+
+
+@pytest.mark.parametrize("model", MODELS, ids=IDS)
+@pytest.mark.parametrize("jets", [[0.0, 0.0, 0.0], [0.0, 0.076, 0.05]])
+def test_a_cold_start_finds_the_equilibrium_that_loading_the_rod_reaches(model, jets):
+    solution = model.solve(jets, HEAVY)
+    # Every load (weight, w_d, jets) raised by hand from nearly nothing, each step
+    # warm-started from the one before: the rod as it is loaded.
+    loaded = None
+    for share in np.linspace(0.05, 1.0, 20):
+        params = replace(HEAVY, gravity_in_base_m_s2=tuple(share * np.array(HEAVY.gravity_in_base_m_s2)),
+                         disturbance=DisturbanceWrench(force_n=tuple(share * np.array(HEAVY.disturbance.force_n)),
+                                                       moment_nm=tuple(share * np.array(HEAVY.disturbance.moment_nm))))
+        loaded = model.solve(share * np.array(jets), params, warm_start=loaded)
+    np.testing.assert_allclose(solution.tip_position_in_base_m, loaded.tip_position_in_base_m, atol=1e-9)
+    # A direct shot from the straight rod converges too, on another equilibrium, which
+    # every later warm start would have followed.
+    prepared = model.prepare(jets, HEAVY)
+    work = model.workspace(prepared)
+    assert model._run(prepared, prepared.jet_forces_n, np.eye(3), 1.0, work)
+    assert model.solution_from(prepared, work).bend_angle_deg > solution.bend_angle_deg + 15.0
 
 
 class Softening:

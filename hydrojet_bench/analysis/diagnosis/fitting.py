@@ -276,8 +276,10 @@ def _fit_once(problem: Problem, candidate: Effect | None, start: ModelParameters
     # Of chi^2 (see the module docstring), per parameter scale.
     gradient = 2.0 * result.scaled_gradient_norm / (sigma2 * max(1.0, chi2 / rows))
     return Fit(label, names, result.values, standard_errors, result.params, predictions, sensor_positions,
-               chi2, rows, result.evaluations, result.unidentifiable, converged=gradient <= GRADIENT_TOLERANCE,
-               stop_reason=result.stop_reason, scaled_gradient=gradient,
+               chi2, rows, result.evaluations, result.unidentifiable,
+               converged=gradient <= GRADIENT_TOLERANCE and not result.off_branch,
+               stop_reason=result.stop_reason + result.branch_note,
+               scaled_gradient=gradient,
                at_bound=_at_bound(candidate, dict(zip(names, result.values))))
 
 
@@ -300,6 +302,11 @@ def fit_candidate(problem: Problem, candidate: Effect, baseline: ModelParameters
     fits = [fit(problem, candidate, baseline, max_evaluations)]
     starts = scan_starts(problem, candidate, baseline, fits[0].training_chi2)
     fits += [fit(problem, candidate, start, max_evaluations) for start in starts]
+    if not any(result.converged for result in fits):
+        # The baseline may have bent far from the truth to absorb the candidate's effect
+        # (a weak jet into a w_d larger than the capsule's weight); on a heavy rod the way
+        # back can cross a fold, where the solver stalls. The baseline's own start avoids it.
+        fits.append(fit(problem, candidate, None, max_evaluations))
     return _best_of(problem, candidate, fits, max_evaluations)
 
 
