@@ -302,11 +302,6 @@ def fit_candidate(problem: Problem, candidate: Effect, baseline: ModelParameters
     fits = [fit(problem, candidate, baseline, max_evaluations)]
     starts = scan_starts(problem, candidate, baseline, fits[0].training_chi2)
     fits += [fit(problem, candidate, start, max_evaluations) for start in starts]
-    if not any(result.converged for result in fits):
-        # The baseline may have bent far from the truth to absorb the candidate's effect
-        # (a weak jet into a w_d larger than the capsule's weight); on a heavy rod the way
-        # back can cross a fold, where the solver stalls. The baseline's own start avoids it.
-        fits.append(fit(problem, candidate, None, max_evaluations))
     return _best_of(problem, candidate, fits, max_evaluations)
 
 
