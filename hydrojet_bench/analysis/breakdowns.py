@@ -199,13 +199,17 @@ class JetScale:
     compared steps, best explains them; 1 means it pushes as the model assumes.
     relative: the scale over the mean of the jets' scales, with its standard error: a
     calibration absorbs a scale common to all jets into E, so only differences between
-    jets point at one. steps: the steps it drives."""
+    jets point at one. steps: the steps it drives. convergence: whether the fit of the
+    gains converged, in words (`CalibrationResult.convergence`): one not converged gives
+    rough scales."""
 
     steps: int
     scale: float
     standard_error: float
     relative: float
     relative_standard_error: float
+    converged: bool = True
+    convergence: str = ""
 
     def as_dict(self) -> dict:
         return {key: getattr(self, key) for key in self.__dataclass_fields__}
@@ -268,7 +272,8 @@ def jet_force_scales(model: ShootingModel, params: ModelParameters, steps: Datas
         gradient[jet] += 1.0 / mean
         table[f"jet {jet + 1}"] = JetScale(int(np.sum(labels == f"jet {jet + 1}")), float(scale[jet]),
                                            float(np.sqrt(covariance[jet, jet])), float(scale[jet] / mean),
-                                           float(np.sqrt(max(gradient @ covariance @ gradient, 0.0))))
+                                           float(np.sqrt(max(gradient @ covariance @ gradient, 0.0))),
+                                           result.converged, result.convergence)
     return table
 
 

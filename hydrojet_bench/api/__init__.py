@@ -170,7 +170,8 @@ def replay(log: str | Path, *, model: str | None = None, effects: Sequence[str] 
     results = compare_steps([estimates[i] for i in validation], steps)
     difference = live_difference_deg(session, estimates) if live_settings else None
     return ReplayResult(choice.model, steps, results, live_settings, difference, calibration,
-                        len(session.steps.calibration_rows()), len(estimates) - len(kept), _log_damage(Path(log)))
+                        len(session.steps.calibration_rows()), len(estimates) - len(kept), _log_damage(Path(log)),
+                        choice.uncalibrated())
 
 
 def study(spec: str | Path | None = None, output: str | Path | None = None, *, workers: int = 2,

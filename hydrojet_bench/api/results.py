@@ -139,7 +139,8 @@ class ReplayResult:
     difference from the live estimates when replayed with the live settings (0:
     identical; None otherwise or without live predictions). calibration: the fit on the
     ``calibration_poses`` logged calibration poses when another model had no params.
-    skipped: steps where the model did not converge, left out."""
+    skipped: steps where the model did not converge, left out. uncalibrated: what of the
+    model ``params`` did not calibrate (`ModelChoice.uncalibrated`)."""
 
     model: ShootingModel
     steps: Dataset
@@ -150,22 +151,25 @@ class ReplayResult:
     calibration_poses: int = 0
     skipped: int = 0
     log_damage: dict | None = None
+    uncalibrated: tuple[str, ...] = ()
 
     def table_ii(self) -> pd.DataFrame:
         return _table_ii(self.results)
 
     def as_dict(self) -> dict:
         """`replay --json`'s document: Table II per method (as `compare` writes it), the
-        live difference, the calibration and the skipped steps."""
+        live difference, the calibration (whether it converged) and the skipped steps."""
         document = _tables_document(self.results)
         calibration = None if self.calibration is None else {
             "poses": self.calibration_poses, "rms_orientation_deg_before": self.calibration.rms_orientation_deg_before,
             "rms_orientation_deg_after": self.calibration.rms_orientation_deg_after,
-            "parameters": dict(zip(self.calibration.names, map(float, self.calibration.values)))}
+            "parameters": dict(zip(self.calibration.names, map(float, self.calibration.values))),
+            "converged": self.calibration.converged, "convergence": self.calibration.convergence,
+            "at_bound": list(self.calibration.at_bound)}
         return {"model": self.model.name, "effects": [effect.name for effect in self.model.effects], **document,
                 "steps": len(self.steps), "skipped_steps": self.skipped, "live_settings": self.live_settings,
                 "live_difference_deg": self.live_difference_deg, "calibration": calibration,
-                "log_damage": self.log_damage}
+                "uncalibrated": list(self.uncalibrated), "log_damage": self.log_damage}
 
     def to_pandas(self) -> pd.DataFrame:
         return predicted_steps_table(self.results, self.steps)

@@ -221,6 +221,10 @@ def print_jet_scales(console: Console, evaluation: Evaluation) -> None:
         table.add_row(label, str(scale.steps), f"{scale.scale:.3f}", f"{scale.standard_error:.3f}",
                       f"{scale.relative:.3f}", f"{scale.relative_standard_error:.3f}")
     console.print(table)
+    unconverged = next((scale for scale in evaluation.jet_scales.values() if not scale.converged), None)
+    if unconverged is not None:
+        console.print(f"[yellow]warning:[/] the fit of the jets' scales is {render.plain(unconverged.convergence)}: "
+                      "read them as rough")
 
 
 def _gap_line(reference: Breakdowns, noise: NoiseFloor | None) -> str:

@@ -17,6 +17,7 @@ import numpy as np
 from . import render
 from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
+from ..estimation.setup_warnings import calibration_warnings
 from .log_notice import warn_if_incomplete
 
 
@@ -41,11 +42,16 @@ def run(args: argparse.Namespace) -> int:
                     profile=args.profile)
     warn_if_incomplete(args.input)
     console = render.console_for(args)
+    warnings = render.progress_console()
     model = result.model
+    for note in result.uncalibrated:
+        warnings.print(f"[yellow]warning:[/] {render.plain(note)}")
     if result.calibration is not None:
         console.print(f"calibrated {model.name} on {result.calibration_poses} logged poses: RMS "
                       f"{result.calibration.rms_orientation_deg_before:.2f} -> "
                       f"{result.calibration.rms_orientation_deg_after:.2f} deg")
+        for warning in calibration_warnings(model, result.calibration):
+            warnings.print(f"[yellow]warning:[/] {render.plain(warning)}")
     print_tables(console, result.results, f"{model.name} replayed on {args.input}")
     if result.live_settings:
         if result.live_difference_deg is None:
@@ -60,8 +66,7 @@ def run(args: argparse.Namespace) -> int:
                                  figure_format=args.figure_format):
             console.print(f"wrote {render.plain(path)}")
     if result.skipped:
-        render.progress_console().print(f"[yellow]warning:[/] {result.skipped} step(s) did not converge and were "
-                                        "left out")
+        warnings.print(f"[yellow]warning:[/] {result.skipped} step(s) did not converge and were left out")
     if args.json:
         render.write_json(args.json, result.as_dict())
     return 0 if np.isfinite(result.results["ref"].overall.orientation_rmse_deg) else 1

@@ -25,6 +25,7 @@ from ..data.dataset import Dataset
 from ..errors import ConvergenceError, UserError
 from ..estimation import OnlineSettings
 from ..estimation.calibration import calibrate_dataset
+from ..estimation.setup_warnings import calibration_warnings
 from ..logs import read_log
 from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log
 from ..logs.topics import Sample
@@ -135,6 +136,8 @@ def estimate(args: argparse.Namespace, em: Dataset, imu: Dataset, bench: dict[st
         params = calibration.params
         origin = (f"calibrated on {len(poses)} EM poses, RMS {calibration.rms_orientation_deg_before:.2f} -> "
                   f"{calibration.rms_orientation_deg_after:.2f} deg")
+        for warning in calibration_warnings(model, calibration):
+            render.progress_console().print(f"[yellow]warning:[/] {render.plain(warning)}")
     try:
         comparison = compare_estimators(model, params, em_steps, imu_steps, OnlineSettings())
     except ValueError as error:

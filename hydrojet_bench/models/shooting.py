@@ -11,8 +11,9 @@ residual is the clamp's orientation error (`hydrojet_bench.models.kernels`).
 A solve is warm-started from a nearby `Solution` when one is given (its tip orientation
 and its solver matrix). A cold start is checked against load ramping (continuation from
 the straight rod), whose equilibrium it keeps when the two differ: a direct cold shot
-may land on another equilibrium branch, one that no loading of the rod reaches. When nothing converges it raises
-`ConvergenceError`: a model never returns an unconverged shape.
+may land on another equilibrium branch, one that no loading of the rod reaches. Cold
+starts that fail, and bends past 150 degrees, are ramped outright. When nothing
+converges it raises `ConvergenceError`: a model never returns an unconverged shape.
 """
 
 from __future__ import annotations
@@ -605,7 +606,7 @@ class ShootingModel:
         straight rod reaches when they differ. Under a large tip load (a heavy capsule on a
         soft horizontal rod, a compressive w_d) there may be several equilibria, and the
         straight seed can land on one that no loading of the rod leads to (c. 110 deg of
-        bend where ramping and the rig give 80): every later warm start would follow it."""
+        bend where ramping gives 80): every later warm start would follow it."""
         ramped, _ = self._ramp(prepared, RAMP_SCHEDULES[0], self.workspace(prepared))
         if ramped is None:
             return direct

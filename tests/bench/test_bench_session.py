@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import json
 import gc
 import time
 from pathlib import Path
@@ -19,6 +20,7 @@ from drivers.imu import output_rate_hz
 from drivers.transport.sim import unregister_device
 from hydrojet_bench.bench.clock import ScaledClock
 from hydrojet_bench.bench.session import Session, SessionAborted, SessionRequest
+from hydrojet_bench.cli import main
 from hydrojet_bench.model_choice import build_model
 from hydrojet_bench.estimation import OnlineSettings
 from hydrojet_bench.logs import read_log
@@ -133,6 +135,24 @@ def test_replay_with_another_model_differs_but_stays_close(finished_session):
     # PRB(20) and Cosserat agree to ~0.03 mm; on the same parameters the online errors
     # differ, but by far less than the errors themselves.
     assert 0.0 < difference < 0.2
+
+
+def test_replay_says_what_its_parameters_did_not_calibrate_and_whether_its_own_fit_converged(finished_session,
+                                                                                                 tmp_path, capsys):
+    log = str(finished_session[0].request.log_path)
+    params, figures = tmp_path / "p.toml", tmp_path / "replay.json"
+    assert main(["calibrate", log, "-o", str(params)]) in (0, 3)
+    capsys.readouterr()
+    assert main(["replay", log, "--params", str(params), "--effect", "jet_gain", "--json", str(figures)]) == 0
+    warnings = " ".join(capsys.readouterr().err.split())
+    assert f"effect jet_gain has no values in {params}: it runs at its defaults" in warnings
+    assert len(json.loads(figures.read_text())["uncalibrated"]) == 1
+    # Another model without parameters is calibrated on the logged poses: its JSON says
+    # whether that fit converged, and an unconverged one is a warning.
+    assert main(["replay", log, "--model", "prb", "--json", str(figures)]) == 0
+    calibration = json.loads(figures.read_text())["calibration"]
+    assert calibration["convergence"].startswith("converged" if calibration["converged"] else "NOT converged")
+    assert ("NOT converged" in capsys.readouterr().err) == (not calibration["converged"])
 
 
 def test_cancelling_a_session_closes_the_valves_and_finishes_the_log(tmp_path):

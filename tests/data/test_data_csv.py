@@ -204,7 +204,7 @@ unit_quaternion = st.tuples(*[st.floats(-1.0, 1.0)] * 4).filter(
 @st.composite
 def datasets(draw: st.DrawFn) -> Dataset:
     n = draw(st.integers(1, 12))
-    times = np.sort(np.array(draw(st.lists(finite, min_size=n, max_size=n))))
+    times = np.sort(np.array(draw(st.lists(finite, min_size=n, max_size=n, unique=True))))  # one sample per time
     forces = np.array(draw(st.lists(st.tuples(*[st.floats(0.0, 0.2)] * 3), min_size=n, max_size=n)))
     base = np.array(draw(st.lists(unit_quaternion, min_size=n, max_size=n)))
     tip = np.array(draw(st.lists(unit_quaternion, min_size=n, max_size=n)))
