@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..estimation.setup_warnings import calibration_warnings
 from . import render
 from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
-from ..estimation.setup_warnings import calibration_warnings
 from .log_notice import warn_if_incomplete
 
 

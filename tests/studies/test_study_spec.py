@@ -29,7 +29,7 @@ from hydrojet_bench.studies.spec import load_study
     ('plans = ["nope"]\n', "plans[0]: plan 'nope': neither a built-in plan"),
     ('profiles = ["nope"]\n', "profiles[0]: rig profile 'nope' not found"),
     ('orientations = ["upside-down"]\n', "orientations[0] must be one of 'hanging', 'horizontal', got 'upside-down'"),
-    ('seeds = "zero"\n', "seeds must be a list of integers, got 'zero'"),
+    ('seeds = "zero"\n', "seeds must be a list of integers with at least 1 entry, got 'zero'"),
     ('seeds = ["zero"]\n', "seeds[0] must be an integer, got 'zero'"),
     ('[[pairs]]\neffects = ["jet_gain", "base_compliance"]\nvalues = {"jet_gain.gain_1" = 9.0}\n',
      "pairs[0].values.jet_gain.gain_1: 9.0 is outside"),
@@ -38,7 +38,8 @@ from hydrojet_bench.studies.spec import load_study
     ('[[setup]]\nerror = "tracker_tilt"\nsizes = [[1.0, 2.0]]\n', "setup[0].sizes[0]: setup error 'tracker_tilt=1,2'"),
     ('[[setup]]\nerror = "jet_force_sign"\nsizes = [[-1]]\norientations = ["horizontal"]\n',
      "setup[0].orientations[0] = 'horizontal' is not among the study's orientations (hanging)"),
-    ('[[pairs]]\neffects = ["jet_gain"]\n', "pairs[0].effects"),
+    ('[[pairs]]\neffects = ["jet_gain"]\n',
+     "pairs[0].effects must be a list of strings with at least 2 entries, got ['jet_gain']"),
     # Absurd sizes are refused here, not left to fail (or fill memory) in every cell.
     ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = {start = 0.0, stop = 1.0, num = 3, '
      'scale = "log"}\n', "effects[0].sizes.start and stop of a log scale must be nonzero and of one sign"),
