@@ -227,3 +227,12 @@ def test_a_report_folder_that_cannot_be_made_is_refused_before_the_work(tmp_path
     message = one_line_error(capsys, [*command, *extra, "--report", str(blocker / "report")])
     assert message == f"cannot create report folder {blocker / 'report'}: {blocker} is a file, not a folder"
     assert not log.exists()  # the session never started
+
+
+def test_an_empty_log_is_called_empty(tmp_path, capsys):
+    """A 0-byte .mcap reads as a log cut before its first record; the error says what it is."""
+    empty = tmp_path / "empty.mcap"
+    empty.touch()
+    message = one_line_error(capsys, ["calibrate", str(empty), "-o", str(tmp_path / "p.toml")])
+    assert message == (f"{empty}: no /bench/sample samples from source 'em': it has no /bench/sample messages "
+                       "(an empty file: 0 bytes)")

@@ -50,7 +50,7 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
     if not rows:
         sources = sorted({sample.source for sample in samples})
         found = f"it has samples from {', '.join(sources)} only" if sources else f"it has no {SAMPLE_TOPIC} messages"
-        cut = " (the log is truncated)" if contents.truncated else ""
+        cut = _empty(path) or (" (the log is truncated)" if contents.truncated else "")
         raise UserError(f"{path}: no {SAMPLE_TOPIC} samples from source {source!r}: {found}{cut}")
     rig = rig_profile_of_log(path, profile, contents.metadata)
 
@@ -109,7 +109,7 @@ def rig_profile_of_log(path: Path, profile: RigProfile | str | Path | None,
     # Logs written before the resolved profile was embedded: the file's own text.
     text = bench.get("profile_toml")
     if not text:
-        raise UserError(f"{path}: the log embeds no rig profile (metadata bench.profile_toml); "
+        raise UserError(f"{path}: the log embeds no rig profile (metadata bench.profile_toml){_empty(path)}; "
                         "give one with --profile")
     where = f"{path}, metadata bench.profile_toml"
     try:
@@ -120,3 +120,12 @@ def rig_profile_of_log(path: Path, profile: RigProfile | str | Path | None,
     if name and "name" not in document:
         document = {**document, "name": name}
     return profile_from_mapping(document, source=where)
+
+
+def _empty(path: str | Path) -> str:
+    """" (an empty file: 0 bytes)" for a log of no bytes at all, which reads as a log cut
+    before its first record (a session stopped before writing anything); else ""."""
+    try:
+        return " (an empty file: 0 bytes)" if Path(path).stat().st_size == 0 else ""
+    except OSError:
+        return ""
