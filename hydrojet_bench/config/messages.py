@@ -212,10 +212,10 @@ def _phrase(annotation: Any) -> str:
                 else:
                     bounds.append(f"{symbol} {bound:g}" if isinstance(bound, float) else f"{symbol} {bound}")
             shortest, longest = getattr(meta, "min_length", None), getattr(meta, "max_length", None)
-            for limit, length in ((("exactly", shortest),) if shortest is not None and shortest == longest
-                                  else (("at least", shortest), ("at most", longest))):
-                if length is not None:
-                    bounds.append(f"with {limit} {length} entr{'y' if length == 1 else 'ies'}")
+            limits = ((("exactly", shortest),) if shortest is not None and shortest == longest
+                      else (("at least", shortest), ("at most", longest)))
+            bounds += [f"with {limit} {length} entr{'y' if length == 1 else 'ies'}"
+                       for limit, length in limits if length is not None]
         return " ".join([words, " and ".join(bounds)]).strip()
     if origin in (typing.Union, types.UnionType):
         return " or ".join(_phrase(a) for a in arguments if a is not type(None))
