@@ -90,11 +90,12 @@ def run(args: argparse.Namespace) -> int:
     console.print(table)
     console.print(f"RMS orientation error on the {_FITTED_ROWS[fit_on]}: {result.rms_orientation_deg_before:.2f} deg "
                   f"before, {result.rms_orientation_deg_after:.2f} deg after ({result.evaluations} evaluations)")
+    warnings = render.progress_console()  # warnings go to standard error, beside the results
     for warning in calibration_warnings(model, result):
-        console.print(f"[yellow]warning:[/] {render.plain(warning)}")
+        warnings.print(f"[yellow]warning:[/] {render.plain(warning)}")
     for first, second, correlation in result.unidentifiable:
-        console.print(f"[yellow]warning:[/] {first} and {second} are not separately identifiable on these rows "
-                      f"(correlation {correlation:+.3f}); their individual values mean little")
+        warnings.print(f"[yellow]warning:[/] {first} and {second} are not separately identifiable on these rows "
+                       f"(correlation {correlation:+.3f}); their individual values mean little")
     make_folder_for(args.output)
     content = calibration_parameter_file(model.name, effect_specs(model.effects, args.output.parent), result,
                                          args.input, profile, fit_on, steps, rows)

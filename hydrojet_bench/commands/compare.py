@@ -107,8 +107,8 @@ def run(args: argparse.Namespace) -> int:
     print_tables(console, after.results, f"{after.model.name} on {args.input}")
     for evaluation in filter(None, (after, before)):
         if "online" in evaluation.results and evaluation.results["online"].fallbacks:
-            console.print(f"[yellow]warning:[/] {evaluation.source}: "
-                          f"{render.plain(evaluation.results['online'].fallback_notice())}")
+            render.progress_console().print(f"[yellow]warning:[/] {evaluation.source}: "
+                                            f"{render.plain(evaluation.results['online'].fallback_notice())}")
     print_breakdowns(console, after, validation, noise)
     if before is not None:
         print_before_after(console, before, after)
@@ -223,8 +223,8 @@ def print_jet_scales(console: Console, evaluation: Evaluation) -> None:
     console.print(table)
     unconverged = next((scale for scale in evaluation.jet_scales.values() if not scale.converged), None)
     if unconverged is not None:
-        console.print(f"[yellow]warning:[/] the fit of the jets' scales is {render.plain(unconverged.convergence)}: "
-                      "read them as rough")
+        render.progress_console().print(f"[yellow]warning:[/] the fit of the jets' scales is "
+                                        f"{render.plain(unconverged.convergence)}: read them as rough")
 
 
 def _gap_line(reference: Breakdowns, noise: NoiseFloor | None) -> str:
