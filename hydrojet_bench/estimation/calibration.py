@@ -370,27 +370,27 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         return fresh is None or float(fresh @ fresh) > (OFF_BRANCH_COST_RATIO * float(fitted @ fitted) + fresh.size
                                                         * max(variance_floor, NEGLIGIBLE_RESIDUAL_RAD**2))
 
+    def checked_fit():
+        """The fit, its values, and the residuals there solved afresh, as every prediction
+        will solve them (the result's errors), with whether they leave the fit's branch."""
+        fit = least_squares_fit()
+        values = (fit.x + offset) * scales
+        fresh = fresh_residuals(values)
+        return fit, values, fresh, off_its_branch(fit.fun, fresh)
+
     try:
         before = residual(start)
-        fit = least_squares_fit()
+        fit, values, fresh, off_branch = checked_fit()
     except ConvergenceError as error:
         raise ConvergenceError(f"calibration stopped: a model solve failed ({error})") from error
     evaluations = int(fit.nfev)
-    values = (fit.x + offset) * scales
-    # The result's errors are those of the poses solved afresh, as every prediction will
-    # solve them, not those the fit saw along its history of seeds.
-    fresh = fresh_residuals(values)
-    off_branch = off_its_branch(fit.fun, fresh)
     refitted = ""
     if off_branch:
         # Again from the start, every evaluation solved afresh: the optimum predictions reach.
         fresh_only[0] = True
         cache.clear()
-        fit = least_squares_fit()
+        fit, values, fresh, off_branch = checked_fit()
         evaluations += int(fit.nfev)
-        values = (fit.x + offset) * scales
-        fresh = fresh_residuals(values)
-        off_branch = off_its_branch(fit.fun, fresh)
         refitted = "; refitted solving every pose afresh (the first fit followed equilibria the rod does not reach)"
     final = fit.fun if fresh is None else fresh
     dof = max(final.size - len(names), 1)
