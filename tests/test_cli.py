@@ -161,7 +161,7 @@ def test_a_step_above_the_valves_limit_is_predicted_at_the_clipped_force_with_a_
     warning = "1 step(s) of the plan (1) ask more than the valves give (0.15, 0.15, 0.15 N per jet)"
     assert f"warning: {warning}" in err
     assert "step 1/1 sweep 0 (clipped to the valves' limit): tip error ref" in err
-    # Not repeated on standard output (where a loaded machine may add a stream-rate warning).
+    # Not repeated on standard output, the report's stream.
     assert "session done: 1/1 steps" in printed.out and warning not in " ".join(printed.out.split())
     events = read_log(tmp_path / "x.mcap", topics=["/events"]).messages
     assert any(e.level == "warning" and e.message.startswith(warning) for e in events)

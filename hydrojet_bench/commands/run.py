@@ -146,7 +146,7 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
     if result is None:
         progress.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
         return 143
-    _print_outcome(console, result, model.name, args)
+    _print_outcome(console, progress, result, model.name, args)
     return 0
 
 
@@ -230,26 +230,31 @@ def _timing(result) -> str:
             "set-up (devices, kernels)")
 
 
-def _print_outcome(console: Console, result, model_name: str, args: argparse.Namespace) -> None:
+def _print_outcome(console: Console, warnings: Console, result, model_name: str, args: argparse.Namespace) -> None:
+    """The session's report on ``console`` (standard output); its warnings on
+    ``warnings`` (standard error, as the command's help says), so that a report sent to a
+    file does not hide them."""
     from ..analysis.compare import compare_steps
     from .compare import print_tables
 
     for check in result.checks:
         if check.status != "pass":
-            console.print(f"[yellow]warning:[/] {render.plain(check.message)}")
+            warnings.print(f"[yellow]warning:[/] {render.plain(check.message)}")
     console.print(f"session done: {result.completed_steps}/{result.step_count} steps, {_timing(result)}")
     if result.calibration is not None:
         console.print(f"calibration on the calibration poses: RMS {result.calibration.rms_orientation_deg_before:.2f} deg "
                       f"-> {result.calibration.rms_orientation_deg_after:.2f} deg")
     for warning in result.calibration_warnings:
-        console.print(f"[yellow]warning:[/] {render.plain(warning)}")
+        warnings.print(f"[yellow]warning:[/] {render.plain(warning)}")
     for rate in result.stream_rates:
-        style = "yellow" if rate.below_warning else "dim"
-        console.print(f"[{style}]{'warning: ' if rate.below_warning else ''}{rate.describe()}[/]", highlight=False)
+        if rate.below_warning:
+            warnings.print(f"[yellow]warning: {rate.describe()}[/]", highlight=False)
+        else:
+            console.print(f"[dim]{rate.describe()}[/]", highlight=False)
     estimates = result.estimates
     steps = result.steps
     if steps is None or not estimates or len(estimates) != len(steps):
-        console.print("[yellow]no complete set of estimated steps to compare[/]")
+        warnings.print("[yellow]warning: no complete set of estimated steps to compare[/]")
     else:
         validation = steps.sweep >= 0
         if validation.any():

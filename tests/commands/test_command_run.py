@@ -130,7 +130,9 @@ def test_a_tilted_field_generator_warns_with_both_gravity_vectors(tmp_path):
                            "calibration:1", "--no-live", "--no-calibration", "--time-scale", "5", "--log",
                            str(log_path)], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stdout + done.stderr
-    printed = " ".join(done.stdout.split())
-    assert "warning: level check: gravity differs by" in printed and "base IMU gravity [" in printed
+    # A warning goes to standard error, beside the progress, not into the report.
+    warned = " ".join(done.stderr.split())
+    assert "warning: level check: gravity differs by" in warned and "base IMU gravity [" in warned
+    assert "level check" not in done.stdout
     (level,) = [m for m in read_log(log_path).on(SetupCheck) if m.check == "level"]
     assert level.status == "warn" and abs(level.values["angle_deg"] - 3.0) < 0.2
