@@ -31,8 +31,8 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
 
     profile: a `RigProfile`, a TOML path or a shipped profile's name; None uses the
         profile embedded in the log.
-    A truncated log gives the samples before the cut, less those of a step the cut
-    interrupted. Raises `UserError` naming the file
+    A truncated or interrupted log gives the samples before the cut, less those of a
+    step the cut interrupted (one without its /bench/step record). Raises `UserError` naming the file
     if there are no samples of that source, a sample is malformed or breaks the CSV
     contract, or no profile is to be had.
     """
@@ -40,11 +40,13 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
     contents = read_log(path, topics=[SAMPLE_TOPIC, Step.topic])
     samples = contents.on(Sample)
     rows = [sample for sample in samples if sample.source == source]
-    if contents.truncated and rows:
-        # Cut while its last step settled: those samples are no equilibrium (no
-        # /bench/step record says it finished), and would be fitted as one.
+    finished = {(step.sweep, step.step) for step in contents.on(Step)}
+    if rows and (contents.truncated or finished):
+        # Cut (truncated, or a session stopped by Ctrl-C or SIGTERM) while its last step
+        # settled: those samples are no equilibrium (no /bench/step record says it
+        # finished), and would be fitted as one.
         last = (rows[-1].sweep, rows[-1].step)
-        if last not in {(step.sweep, step.step) for step in contents.on(Step)}:
+        if last not in finished:
             while rows and (rows[-1].sweep, rows[-1].step) == last:
                 rows.pop()
     if not rows:
