@@ -21,8 +21,8 @@
    * ``undecided`` instead of a name or ``unexplained`` when the fits cannot tell: the
      baseline's fit did not converge (no candidate can be measured against a baseline
      short of its optimum, unless it brings the held-out error to the floor), or no
-     candidate's did, or one that did not would remove the excess were its fit to be
-     believed.
+     candidate's did, or none qualifies and one that did not would remove the excess
+     were its fit to be believed.
    * before a stage says ``unexplained``, its one- and two-parameter candidates get a
      second pass: a profile scan of their parameters with the baseline's re-fitted at
      each point (`fitting.profile_starts`), and the decision is taken again. A stiffening
@@ -43,7 +43,8 @@
    jet wiring, reversed or mis-scaled jet forces, a tilted tracker, a turned base sensor)
    are fitted beside the physical candidates, moved to their own ranking, and decided
    first (`setup.with_setup_stage`: setup wins unless a physical candidate is
-   significantly better by the held-out test of 5.).
+   significantly better by the held-out test of 5., or decisively better by score and
+   no worse held out).
    A setup winner joins the baseline like a physical one for the later stages.
 
 Score: BIC on the TRAINING residuals with the noise scale fixed at the measured floor,
