@@ -65,8 +65,8 @@ def test_user_mistakes_are_one_line_without_traceback(tmp_path):
 
 
 SIM_PROFILE = (PROFILES_DIR / "sim.toml").read_text()
-TWO_STEPS = ("[[step]]\nq1 = 0.05\nq2 = 0.0\nq3 = 0.0\nsettle_s = 0.5\n"
-             "[[step]]\nq1 = 0.0\nq2 = 0.05\nq3 = 0.0\nsettle_s = 0.5\n")
+TWO_STEPS = ("[[step]]\nq1 = 0.05\nq2 = 0.0\nq3 = 0.0\nsettle_s = 2.0\n"
+             "[[step]]\nq1 = 0.0\nq2 = 0.05\nq3 = 0.0\nsettle_s = 2.0\n")
 
 
 def one_line_error(capsys, argv: list[str]) -> str:
@@ -149,6 +149,18 @@ def test_calibrate_without_calibration_poses_says_so(tmp_path, capsys):
                     "0.0,0.05,0,0,0,1,0,0,0,1,0,0,0\n")
     message = one_line_error(capsys, ["calibrate", str(data), "-o", str(tmp_path / "p.toml")])
     assert message.startswith(f"{data}: no calibration poses (steps of sweep -1) to fit on"), message
+
+
+def test_a_plan_of_steps_shorter_than_the_averaging_window_is_warned_before_it_runs(tmp_path, capsys):
+    plan = tmp_path / "plan.csv"
+    plan.write_text("q1,q2,q3,settle_s\n0.05,0,0,0.3\n0,0.05,0,5\n")
+    assert main(["run", "--plan", str(plan), "--no-live", "--time-scale", "20", "--no-calibration",
+                 "--log", str(tmp_path / "x.mcap")]) == 0
+    warning = ("1 step(s) of the plan (1) hold no longer than the 1 s each step's settled state is averaged over "
+               "(session.window_s)")
+    assert f"warning: {warning}" in " ".join(capsys.readouterr().err.split())
+    events = read_log(tmp_path / "x.mcap", topics=["/events"]).messages
+    assert any(e.level == "warning" and e.message.startswith(warning) for e in events)
 
 
 def test_a_step_above_the_valves_limit_is_predicted_at_the_clipped_force_with_a_warning(tmp_path, capsys):

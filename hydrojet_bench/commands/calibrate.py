@@ -27,7 +27,8 @@ from ..params_io import calibration_parameter_file, check_parameter_output, effe
 from . import render
 from .common import add_input_arguments, add_model_arguments, load_steps
 from .next_steps import command, input_words, print_next
-from .log_notice import warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_unsettled
+from .log_notice import (warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_unsettled,
+                         warn_if_unsettled_steps)
 
 
 # Past this the orientations no longer count (a millimetre weighs ten radians) and the
@@ -75,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"{args.input}: no {_ROW_NAMES[fit_on]} to fit on; record some with "
                         f"`hydrojet-bench run --plan {plan}`")
     single_sample_steps = warn_if_unsettled(args.input, steps, log_damage)
+    unsettled_steps = warn_if_unsettled_steps(args.input, steps.select(rows))
     used = _rows_used(steps, rows)
     try:
         result = calibrate_dataset(model, steps, profile.model_parameters(), choice.calibration_names,
@@ -109,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
         render.write_json(args.json, {**CalibrateResult(model, choice.effect_specs, steps.select(rows), result,
                                                         content).as_dict(), "log_damage": log_damage,
                                     "profile_mismatch": profile_mismatch,
-                                    "single_sample_steps": single_sample_steps})
+                                    "single_sample_steps": single_sample_steps,
+                                    "unsettled_steps": unsettled_steps})
     compare = command("compare", *input_words(args), "--params", args.output, "--online")
     print_next(console, "see how it predicts the sweeps with", [compare])
     return 0 if result.converged and not result.at_bound else UNTRUSTED

@@ -34,7 +34,7 @@ from . import render
 from .common import add_input_arguments, add_model_arguments, comparison_steps
 from .figure_options import add_format_argument
 from .log_notice import (warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_uncalibrated,
-                         warn_if_unsettled)
+                         warn_if_unsettled, warn_if_unsettled_steps)
 
 LABELS = {"ref": "Ref.", "online": "Proposed"}
 BREAKDOWN_KEYS = ("by_jet", "by_direction", "by_region", "loading_unloading", "over_time", "worst_poses")
@@ -89,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     log_damage = warn_if_incomplete(args.input)
     profile_mismatch = warn_if_recorded_elsewhere(args.input, args.profile, profile)
     single_sample_steps = warn_if_unsettled(args.input, steps, log_damage)
+    unsettled_steps = warn_if_unsettled_steps(args.input, validation)
 
     def evaluate(choice: ModelChoice) -> Evaluation:
         params = choice.parameters(profile.model_parameters())
@@ -113,7 +114,8 @@ def run(args: argparse.Namespace) -> int:
     if before is not None:
         print_before_after(console, before, after)
     if args.json:
-        write_json(args.json, validation, after, before, log_damage, noise, profile_mismatch, single_sample_steps)
+        write_json(args.json, validation, after, before, log_damage, noise, profile_mismatch, single_sample_steps,
+                   unsettled_steps)
     if args.report:
         from ..analysis.report import write_report
 
@@ -361,11 +363,13 @@ def figures(evaluation: Evaluation, steps: Dataset) -> dict:
 
 def write_json(path: Path, steps: Dataset, evaluation: Evaluation, baseline: Evaluation | None = None,
                log_damage: dict | None = None, noise: NoiseFloor | None = None,
-               profile_mismatch: dict | None = None, single_sample_steps: dict | None = None) -> None:
+               profile_mismatch: dict | None = None, single_sample_steps: dict | None = None,
+               unsettled_steps: dict | None = None) -> None:
     document = figures(evaluation, steps)
     document["log_damage"] = log_damage
     document["profile_mismatch"] = profile_mismatch
     document["single_sample_steps"] = single_sample_steps
+    document["unsettled_steps"] = unsettled_steps
     document["noise_floor"] = None if noise is None else noise.as_dict()
     gap = evaluation.breakdowns["ref"].loading
     document["hysteresis_gap_vs_noise"] = (None if noise is None or gap.hysteresis_gap_deg is None else

@@ -41,7 +41,8 @@ from ..profile import RigProfile
 from . import render
 from .common import add_input_arguments, add_model_arguments, comparison_steps, load_steps
 from .figure_options import add_format_argument
-from .log_notice import warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_unsettled
+from .log_notice import (warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_unsettled,
+                         warn_if_unsettled_steps)
 from .next_steps import command, effect_words, input_words, print_next
 
 # Exit code of a diagnosis whose fits could not decide (`UNDECIDED`).
@@ -97,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
     log_damage = warn_if_incomplete(args.input)
     profile_mismatch = warn_if_recorded_elsewhere(args.input, args.profile, profile)
     single_sample_steps = warn_if_unsettled(args.input, steps, log_damage)
+    unsettled_steps = warn_if_unsettled_steps(args.input, steps)
     console = render.console_for(args)
     diagnosis = _diagnose(args, profile, steps, choice, candidates, render.console(stderr=True))
     print_diagnosis(console, diagnosis, args)
@@ -110,7 +112,8 @@ def run(args: argparse.Namespace) -> int:
         render.write_json(args.json, {"data": str(args.input), **diagnosis.as_dict(),
                                       "add_step": None if preview is None else preview.as_dict(),
                                       "log_damage": log_damage, "profile_mismatch": profile_mismatch,
-                                      "single_sample_steps": single_sample_steps})
+                                      "single_sample_steps": single_sample_steps,
+                                      "unsettled_steps": unsettled_steps})
     if args.export_profile is not None:
         _export_profile(console, diagnosis, profile, args.export_profile)
     if args.report:

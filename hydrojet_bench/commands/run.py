@@ -99,6 +99,7 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
     limits = tuple(table.max_force_n for table in settings.valve_calibrations())
     plan, clipped = choose_plan(args.plan, settle_s=settings.session.settle_s).clipped(limits)
     clip_warning = clipped_warning(clipped, limits)
+    plan_warnings = tuple(filter(None, (clip_warning, _short_steps_warning(plan, settings.session.window_s))))
     choice = model_choice(args, ModelDefaults(settings.estimator.model, tuple(settings.estimator.effects),
                                               origin=f"{profile.source} (estimator.effects)"))
     model, requested = choice.model, choice.requested
@@ -117,7 +118,7 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
     request = SessionRequest(profile=profile, settings=settings, plan=plan, log_path=log_path, model=model,
                              effects=choice.effect_specs, params=choice.parameters(profile.model_parameters()),
                              calibrate=not args.no_calibration, calibration_names=choice.calibration_names,
-                             seed=args.seed, warnings=((clip_warning,) if clip_warning else ())
+                             seed=args.seed, warnings=plan_warnings
                              # The session's own calibration fits what the file did not.
                              + (choice.uncalibrated() if args.no_calibration else ()),
                              command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]), overwrite_log=overwrite,
@@ -129,8 +130,8 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
                   f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.session.time_scale:g}, "
                   f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; "
                   f"log {render.plain(log_path)}", highlight=False)
-    if clip_warning:
-        progress.print(f"[yellow]warning:[/] {clip_warning}")
+    for warning in plan_warnings:
+        progress.print(f"[yellow]warning:[/] {render.plain(warning)}")
     if server is not None:
         progress.print(f"Foxglove: open a connection to {server.url} (layout: docs/foxglove/hydrojet.json)",
                        highlight=False, markup=False)
@@ -148,6 +149,19 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
         return 143
     _print_outcome(console, progress, result, model.name, args)
     return 0
+
+
+def _short_steps_warning(plan, window_s: float) -> str:
+    """The plan's steps that hold no longer than the session's averaging window, in words
+    ("" for none): their settled states take in the rod still moving after the jets
+    changed (a plan of 0.3 s steps on the nominal twin: Table II 33 deg)."""
+    short = [index for index, step in enumerate(plan.steps) if step.settle_s <= window_s]
+    if not short:
+        return ""
+    shown = ", ".join(str(index + 1) for index in short[:5]) + (", ..." if len(short) > 5 else "")
+    return (f"{len(short)} step(s) of the plan ({shown}) hold no longer than the {window_s:g} s each step's "
+            "settled state is averaged over (session.window_s): their errors take in the rod still moving, "
+            "which the quasistatic models read as model error; hold each command longer")
 
 
 def _foxglove(address: str | None) -> contextlib.AbstractContextManager:

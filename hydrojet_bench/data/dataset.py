@@ -55,6 +55,10 @@ class SampleFlag(enum.IntFlag):
     SATURATED: a commanded jet force is above the profile's ``max_jet_force_n``: the
         valve clips it, so the force the rod felt is not the one recorded. Derived from
         the profile when a CSV is read.
+    UNSETTLED: a row of `Dataset.quasistatic_steps` whose tip was still turning within
+        its averaging window (`UNSETTLED_TREND_DEG`): no equilibrium, which a
+        quasistatic model reads as its own error. Kept, and said by the analysis
+        commands.
     """
 
     NONE = 0
@@ -62,11 +66,22 @@ class SampleFlag(enum.IntFlag):
     TIP_MISSING = 2
     OUT_OF_VOLUME = 4
     SATURATED = 8
+    UNSETTLED = 16
 
+
+# The last seconds of a step that the analysis averages into its settled state.
+STEP_WINDOW_S = 1.0
+# `SampleFlag.UNSETTLED`: the tip turned more than this across a step's averaging window
+# (a line fitted to its orientation over time), at more than UNSETTLED_SIGNIFICANCE
+# standard errors of the samples' scatter. The twin's rod (settling time constant 0.5 s)
+# turns some 0.03 deg in the last second of a 5 s hold after a 90 deg change, and 40 %
+# of the change in a 0.3 s step; half the turn biases the step's mean.
+UNSETTLED_TREND_DEG = 0.25
+UNSETTLED_SIGNIFICANCE = 5.0
 
 # Flags that make a sample unfit for calibration and comparison by default.
 UNUSABLE = SampleFlag.BASE_MISSING | SampleFlag.TIP_MISSING | SampleFlag.OUT_OF_VOLUME | SampleFlag.SATURATED
-_ALL_FLAGS = int(UNUSABLE)
+_ALL_FLAGS = int(UNUSABLE | SampleFlag.UNSETTLED)
 
 
 def saturation_flags(jet_forces_n: ArrayLike, profile: RigProfile) -> NDArray[np.int64]:
@@ -97,6 +112,42 @@ def average_quaternions(quaternions: ArrayLike, weights: ArrayLike | None = None
         raise ValueError(f"average_quaternions needs an (n, 4) array with n >= 1, got shape {q.shape}")
     w = np.ones(len(q)) if weights is None else np.asarray(weights, dtype=float)
     return _average_groups(q, np.zeros(len(q), dtype=np.int64), 1, w)[0]
+
+
+def turning_steps(time_s: np.ndarray, orientation: np.ndarray, group: np.ndarray,
+                  mean_orientation: np.ndarray) -> np.ndarray:
+    """The groups (steps) whose orientation (w, x, y, z) turns over time: a line fitted to
+    each sample's rotation from its group's mean (``mean_orientation``, one row per
+    group) against time turns more than `UNSETTLED_TREND_DEG` across the group's time
+    span, at more than `UNSETTLED_SIGNIFICANCE` standard errors of the line's scatter.
+    Groups of fewer than three samples have no scatter to judge and are never turning.
+    Returns a boolean mask over the groups."""
+    groups = len(mean_orientation)
+    count = np.bincount(group, minlength=groups).astype(float)
+    # Rotation from the mean, small: twice the vector part of mean^-1 q, w made positive.
+    relative = quat_multiply(quat_conjugate(mean_orientation[group]), orientation)
+    vector = 2.0 * relative[:, 1:] * np.where(relative[:, :1] < 0.0, -1.0, 1.0)
+
+    def sums(values: np.ndarray) -> np.ndarray:
+        return np.bincount(group, weights=values, minlength=groups)
+
+    with np.errstate(invalid="ignore", divide="ignore"):
+        centred = time_s - (sums(time_s) / count)[group]
+        spread = sums(centred**2)
+        slopes = np.stack([sums(centred * vector[:, k]) / spread for k in range(3)], axis=1)
+        # Scatter about the lines, pooled over the three components.
+        residual = sum(sums(vector[:, k]**2) - slopes[:, k]**2 * spread - sums(vector[:, k])**2 / count
+                       for k in range(3))
+        variance = np.maximum(residual, 0.0) / (3.0 * (count - 2.0))
+        span = np.maximum.reduceat(time_s, _starts(group)) - np.minimum.reduceat(time_s, _starts(group))
+        turn = np.linalg.norm(slopes, axis=1) * span
+        significant = np.linalg.norm(slopes, axis=1) > UNSETTLED_SIGNIFICANCE * np.sqrt(variance / spread)
+    return (count >= 3) & (turn > np.radians(UNSETTLED_TREND_DEG)) & significant
+
+
+def _starts(group: np.ndarray) -> np.ndarray:
+    """The first index of each group in ``group`` (consecutive, sorted, every group present)."""
+    return np.flatnonzero(np.r_[True, group[1:] != group[:-1]])
 
 
 def _average_groups(q: np.ndarray, group: np.ndarray, groups: int, weights: np.ndarray) -> np.ndarray:
@@ -375,7 +426,7 @@ class Dataset:
 
     # --- quasistatic reduction ---------------------------------------------------------
 
-    def quasistatic_steps(self, window_s: float | None = 1.0, exclude: int = UNUSABLE) -> Dataset:
+    def quasistatic_steps(self, window_s: float | None = STEP_WINDOW_S, exclude: int = UNUSABLE) -> Dataset:
         """One row per contiguous (sweep, step) run: its settled state.
 
         Each step is averaged over the samples in its last ``window_s`` seconds (None:
@@ -386,6 +437,8 @@ class Dataset:
         union of their flags (so `valid_mask` leaves it out); otherwise the row keeps
         the union of the flags of the samples used. ``samples`` counts the recorded
         samples each row averages (the rows' own counts summed, if they are averages).
+        A step whose tip was still turning in its window gets `SampleFlag.UNSETTLED`
+        (`turning_steps`).
         """
         if window_s is not None and not (np.isfinite(window_s) and window_s >= 0):
             raise ValueError(f"window_s must be >= 0 s or None, got {window_s!r}")
@@ -416,6 +469,12 @@ class Dataset:
         weights = np.ones(len(index))
         flags = np.zeros(groups, dtype=np.int64)
         np.bitwise_or.at(flags, group, self.flags[index])
+        if self.samples is None:  # samples, not averages: their scatter is the noise
+            # The tip relative to the base: a base that moves with the rig is no motion of the rod.
+            tip_in_base = quat_multiply(quat_conjugate(self.base_orientation[index]), self.tip_orientation[index])
+            turning = turning_steps(self.time_s[index], tip_in_base, group,
+                                    _average_groups(tip_in_base, group, groups, weights))
+            flags[turning] |= int(SampleFlag.UNSETTLED)
         window = "all samples" if window_s is None else f"last {window_s:g} s"
         return Dataset(
             time_s=self.time_s[last],

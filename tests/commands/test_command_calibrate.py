@@ -111,6 +111,28 @@ def test_steps_of_a_single_sample_are_warned_in_the_output_and_the_json(hysteret
         assert json.loads(document.read_text())["single_sample_steps"] == expected
 
 
+def test_steps_whose_tip_still_turned_are_warned_in_the_output_and_the_json(hysteretic, tmp_path, capsys):
+    """Commands held 0.4 s, shorter than the rod takes to settle: each step's average
+    takes in the rod still moving. calibrate, compare and diagnose say how many; the
+    twin's settled table says nothing."""
+    profile = load_profile("sim")
+    twin = DigitalTwin(TwinConfig.from_profile(profile, seed=6))
+    brief = tmp_path / "brief.csv"
+    write_csv(twin.run_plan(calibration_plan(12, seed=6, settle_s=0.4)).to_dataset(profile, "brief twin"), brief)
+    warning = (f"warning: {brief}: in 12 of 12 steps the tip was still turning (by more than 0.25 deg) over the "
+               "last 1 s")
+    for table, warned in ((hysteretic, False), (brief, True)):
+        params, document = tmp_path / f"{table.stem}.toml", tmp_path / f"{table.stem}.json"
+        main(["calibrate", str(table), "-o", str(params), "--json", str(document)])
+        assert (warning in " ".join(capsys.readouterr().err.split())) == warned
+        expected = {"count": 12, "steps": 12, "window_s": 1.0, "trend_deg": 0.25} if warned else None
+        assert json.loads(document.read_text())["unsettled_steps"] == expected
+    assert main(["compare", str(brief), "--params", str(tmp_path / "brief.toml"), "--json",
+                 str(tmp_path / "c.json")]) == 0
+    assert warning in " ".join(capsys.readouterr().err.split())
+    assert json.loads((tmp_path / "c.json").read_text())["unsettled_steps"] == expected
+
+
 def test_a_value_pushed_onto_its_bound_is_warned_written_and_exits_3(tmp_path, capsys):
     """A jet 60 % stronger than nominal, fitted with gains that may reach 1.5: the file is
     written, but the command says the value sits on its bound and exits 3, not 0."""

@@ -20,7 +20,8 @@ CLOGGED_JET = f"{Path(__file__).resolve().parents[2] / 'docs/examples/clogged_je
 TABLE_2_KEYS = {"orientation_rmse_deg", "position_rmse_mm", "by_sweep", "by_bend"}
 BREAKDOWN_KEYS = {"by_jet", "by_direction", "by_region", "loading_unloading", "over_time", "worst_poses",
                   "per_step", "parameters", "jet_force_scale"}
-NOISE_KEYS = {"log_damage", "profile_mismatch", "single_sample_steps", "noise_floor", "hysteresis_gap_vs_noise"}
+NOISE_KEYS = {"log_damage", "profile_mismatch", "single_sample_steps", "unsettled_steps", "noise_floor",
+              "hysteresis_gap_vs_noise"}
 
 
 @pytest.fixture(scope="module")

@@ -80,7 +80,8 @@ def test_selection_by_sweep_and_flags() -> None:
     assert data.valid_mask().tolist() == [True, False, True, False, True, True]
     assert data.valid_mask(exclude=SampleFlag.TIP_MISSING).tolist() == [True, False, True, True, True, True]
     assert len(data.valid_rows()) == 4
-    assert data.flag_counts() == {"BASE_MISSING": 0, "TIP_MISSING": 1, "OUT_OF_VOLUME": 1, "SATURATED": 1}
+    assert data.flag_counts() == {"BASE_MISSING": 0, "TIP_MISSING": 1, "OUT_OF_VOLUME": 1, "SATURATED": 1,
+                                 "UNSETTLED": 0}
     picked = data.select([1, 4])
     assert picked.flags.tolist() == [SampleFlag.TIP_MISSING, 0] and picked.source == "unit"
     with pytest.raises(ValueError, match="time goes backwards"):
@@ -187,9 +188,26 @@ def test_quasistatic_steps_average_noisy_samples_to_the_truth() -> None:
         assert np.linalg.norm(steps.tip_position_m[row] - tip_pos_truth) < 0.3e-3
     np.testing.assert_array_equal(steps.flags, 0)
     assert "quasistatic" in steps.source
-    # Averaging the whole step drags in the 30 degree transient.
+    # Averaging the whole step drags in the 30 degree transient, and says so.
     whole = data.quasistatic_steps(window_s=None)
     assert rotation_angle_deg(whole.tip_orientation[0], truths[0][1]) > 1.0
+    assert np.all(whole.flags == SampleFlag.UNSETTLED)
+
+
+def test_steps_whose_tip_still_turns_in_their_window_are_flagged_unsettled() -> None:
+    """Commands held 0.6 s (the transient's time constant is 0.4 s): every step's window
+    holds the rod still turning. A still tip, noisy or exact, is never flagged, nor a
+    step too short to judge (two samples)."""
+    rng = np.random.default_rng(11)
+    data, _ = noisy_steps(rng)
+    brief = data.select((data.time_s % 5.0) < 0.6)
+    assert np.all(brief.quasistatic_steps().flags == SampleFlag.UNSETTLED)
+    settled = data.select((data.time_s % 5.0) > 3.0)
+    np.testing.assert_array_equal(settled.quasistatic_steps(window_s=None).flags, 0)
+    still = simple(6)
+    assert still.quasistatic_steps(window_s=None).flags.tolist() == [0]
+    turning = simple(2, tip_orientation=quat_from_rotvec(np.outer([0.0, 0.5], [1.0, 0.0, 0.0])))
+    assert turning.quasistatic_steps(window_s=None).flags.tolist() == [0]
 
 
 def test_each_step_counts_the_samples_it_averages_through_selection_and_reduction() -> None:

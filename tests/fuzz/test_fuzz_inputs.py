@@ -66,15 +66,15 @@ def seeds() -> Iterator[Path]:
         folder = Path(name)
         profile = load_profile("sim")
         twin = DigitalTwin(TwinConfig.from_profile(profile))
-        plan = calibration_plan(12, settle_s=1.0) + validation_sweeps(steps_up=2, repetitions=1, settle_s=1.0)
+        plan = calibration_plan(12, settle_s=5.0) + validation_sweeps(steps_up=2, repetitions=1, settle_s=5.0)
         write_csv(twin.run_plan(plan, sample_rate_hz=10.0, record_window_s=0.3).to_dataset(profile, "fuzz seed"),
                   folder / "data.csv")
         outcome = invoke(["calibrate", str(folder / "data.csv"), "-o", str(folder / "params.toml")])
         assert outcome[0] == 0, outcome
         (folder / "rig.toml").write_text((PROFILES_DIR / "sim.toml").read_text())
-        (folder / "plan.toml").write_text("[[step]]\nq1 = 0.05\nq2 = 0.0\nq3 = 0.0\nsettle_s = 0.5\n"
-                                          "[[step]]\nq1 = 0.0\nq2 = 0.05\nq3 = 0.0\nsettle_s = 0.5\n")
-        (folder / "plan.csv").write_text("q1,q2,q3,settle_s\n0.05,0,0,0.5\n0,0.05,0,0.5\n")
+        (folder / "plan.toml").write_text("[[step]]\nq1 = 0.05\nq2 = 0.0\nq3 = 0.0\nsettle_s = 2.0\n"
+                                          "[[step]]\nq1 = 0.0\nq2 = 0.05\nq3 = 0.0\nsettle_s = 2.0\n")
+        (folder / "plan.csv").write_text("q1,q2,q3,settle_s\n0.05,0,0,2.0\n0,0.05,0,2.0\n")
         (folder / "effect.py").write_text(EFFECT)
         yield folder
     if COUNTS:
