@@ -61,7 +61,12 @@ def _all_subparsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentPa
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser(sys.argv[1:] if argv is None else argv)
+    try:
+        # Ctrl-C while the command's modules load (numba's take seconds) is no bug either.
+        parser = build_parser(sys.argv[1:] if argv is None else argv)
+    except KeyboardInterrupt:
+        Console(stderr=True).print("interrupted")
+        return 130
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()

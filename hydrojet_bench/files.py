@@ -49,6 +49,19 @@ def check_folder_target(folder: Path, what: str) -> None:
         raise UserError(f"cannot create {what} {folder}: {existing} is a file, not a folder")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise UserError(f"cannot create {what} {folder}: {existing} is not writable")
+    # Permission bits do not say everything (root may write anywhere but /proc, a full or
+    # read-only disk): make the missing folders and take them away again.
+    made = []
+    try:
+        for missing in reversed([p for p in (folder, *folder.parents) if p != existing and not p.exists()
+                                 and existing in p.parents]):
+            missing.mkdir()
+            made.append(missing)
+    except OSError as error:
+        raise UserError(f"cannot create {what} {folder}: {error.strerror or error}") from None
+    finally:
+        for created in reversed(made):
+            created.rmdir()
 
 
 def check_replaceable(path: Path, what: str, of_its_kind: Callable[[bytes], bool]) -> None:

@@ -11,9 +11,12 @@ import numpy as np
 import pytest
 from rich.console import Console
 
+from hydrojet_bench import cli
 from hydrojet_bench.cli import COMMAND_MODULES, main
 from hydrojet_bench.commands import render
 from hydrojet_bench.config.loading import PROFILES_DIR
+from hydrojet_bench.errors import UserError
+from hydrojet_bench.files import check_folder_target
 from hydrojet_bench.logs import read_log
 
 
@@ -141,6 +144,36 @@ def test_the_physical_rig_profile_without_its_i2c_bus_is_one_line(tmp_path, caps
     # No log of the request alone stands in the way of the retry.
     assert not (tmp_path / "x.mcap").exists()
     assert "cannot open /dev/i2c-1" in one_line_error(capsys, command)
+
+
+@pytest.mark.parametrize("key", ["tracker", "valves"])
+def test_a_serial_port_that_cannot_be_opened_names_the_profile_key(tmp_path, capsys, key):
+    profile = tmp_path / "port.toml"
+    profile.write_text(f'extends = "sim"\n[transports]\n{key} = "serial:///dev/ttyNOPE"\n')
+    plan = tmp_path / "plan.toml"
+    plan.write_text(TWO_STEPS)
+    message = one_line_error(capsys, ["run", "--profile", str(profile), "--plan", str(plan), "--no-live", "--log",
+                                      str(tmp_path / "x.mcap")])
+    assert message.startswith(f"{profile}: transports.{key} = 'serial:///dev/ttyNOPE': "), message
+    assert "cannot open /dev/ttyNOPE" in message and message.endswith("(nothing was measured: no log kept)")
+
+
+def test_ctrl_c_while_the_commands_modules_load_is_no_traceback(monkeypatch, capsys):
+    def interrupted(argv):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "build_parser", interrupted)
+    assert main(["run"]) == 130
+    assert capsys.readouterr().err.strip() == "interrupted"
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs a folder no one can create in")
+def test_a_report_folder_that_cannot_be_made_is_refused_before_the_work(tmp_path):
+    """Root passes every permission test, but not /proc's."""
+    with pytest.raises(UserError, match="cannot create report folder /proc/x/y"):
+        check_folder_target(Path("/proc/x/y"), "report folder")
+    check_folder_target(tmp_path / "a" / "b", "report folder")
+    assert not (tmp_path / "a").exists()  # tried, and taken away again
 
 
 def test_calibrate_without_calibration_poses_says_so(tmp_path, capsys):

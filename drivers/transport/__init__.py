@@ -11,7 +11,7 @@ from a thread) and `drivers.transport.sim` (`serve_sim`, `register_device`: in-p
 Test doubles (scripted mock, fault injection) live in `drivers.testing`.
 """
 
-from drivers.transport.base import Transport, TransportClosed, TransportError
+from drivers.transport.base import Transport, TransportClosed, TransportError, TransportOpenError
 from drivers.transport.url import open_transport
 
-__all__ = ["Transport", "TransportClosed", "TransportError", "open_transport"]
+__all__ = ["Transport", "TransportClosed", "TransportError", "TransportOpenError", "open_transport"]

@@ -14,6 +14,11 @@ class TransportError(Exception):
     """Base class for every transport failure (cannot open, I/O error, ...)."""
 
 
+class TransportOpenError(TransportError):
+    """The link could not be opened at all (no such port, no permission, in use): most
+    often the configuration's to fix, not the device's."""
+
+
 class TransportClosed(TransportError):
     """The peer is gone: EOF, hang-up, unplugged adapter, or the transport was closed."""
 

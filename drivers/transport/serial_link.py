@@ -15,7 +15,7 @@ from urllib.parse import parse_qsl, urlsplit
 
 import serial
 
-from drivers.transport.base import TransportClosed, TransportError
+from drivers.transport.base import TransportClosed, TransportError, TransportOpenError
 from drivers.transport.buffered import BufferedTransport
 
 DEFAULT_BAUD = 115200
@@ -98,7 +98,7 @@ class SerialTransport(BufferedTransport):
         try:
             ser.open()
         except (serial.SerialException, OSError, ValueError) as exc:
-            raise TransportError(f"{self.url}: cannot open {self.port}: {exc}") from exc
+            raise TransportOpenError(f"{self.url}: cannot open {self.port}: {exc}") from exc
         self._serial = ser
         self._fd = ser.fileno()
         os.set_blocking(self._fd, False)

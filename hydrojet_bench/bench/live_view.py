@@ -72,6 +72,6 @@ class LiveView:
         kept = "" if status.time_scale_kept is None else f"x{status.time_scale_kept:.1f} kept of "
         table.add_row("session time", f"{status.session_time_s:.0f} s ({kept}x{self.time_scale:g})")
         events = Table.grid()
-        for t_s, level, message in status.events:
+        for t_s, level, message, _ in status.events:
             events.add_row(f"[{_LEVEL_STYLE.get(level, '')}]{t_s:7.1f} s  {escape(message)}[/]")
         return Panel(Group(self._progress, table, events), title=self.title)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from drivers.aurora.client import AuroraTracker
 from drivers.imu import AsyncIcm20948, Icm20948, ImuPairFusion, sample_rate_divider_for
 from drivers.valve.client import ValveController
+from drivers.transport import TransportOpenError
 
 from ..config import SIM, RigConfig
 from ..errors import UserError
@@ -86,7 +87,7 @@ async def open_rig(profile: RigProfile, settings: RigConfig, clock: Clock, *, se
                                 'PC? imu_bus = "sim" emulates the IMUs)') from None
         tracker = AuroraTracker(tracker_url, list(settings.tracker.tools), use_tx=settings.tracker.use_tx,
                                 clock=clock.now)
-        await stack.enter_async_context(tracker)
+        await _open_port(stack, tracker, profile, "tracker", tracker_url)
         on_event("info", "tracker", f"tracking {', '.join(tracker.handles)} ({tracker.version_text.strip()[:40]})")
         imus = None if imu_bus is None else await _open_imus(imu_bus, settings, clock)
         if imus is not None:
@@ -99,9 +100,25 @@ async def open_rig(profile: RigProfile, settings: RigConfig, clock: Clock, *, se
                                  reply_timeout_s=valve_settings.reply_timeout_ms / 1000.0,
                                  heartbeat_interval_s=valve_settings.heartbeat_ms / 1000.0)
         # Entered last, so it exits first: ALL_OFF before anything else is torn down.
-        await stack.enter_async_context(valves)
+        await _open_port(stack, valves, profile, "valves", valves_url)
         on_event("info", "valves", "armed")
         yield Rig(valves, tracker, imus, simulated)
+
+
+async def _open_port(stack: contextlib.AsyncExitStack, device, profile: RigProfile, key: str, url: str) -> None:
+    """Enter ``device``; a port that cannot be opened at all (no such device, no
+    permission) is the profile's ``transports.<key>`` to fix: said as one line naming
+    them, like the IMU bus."""
+    try:
+        await stack.enter_async_context(device)
+    except Exception as error:
+        cause: BaseException | None = error
+        while cause is not None and not isinstance(cause, TransportOpenError):
+            cause = cause.__cause__
+        if cause is None:
+            raise
+        raise UserError(f"{profile.source}: transports.{key} = {url!r}: {cause} (is this the rig's PC, and the "
+                        f'device plugged in? {key} = "sim" emulates it)') from None
 
 
 async def _open_imus(bus, settings: RigConfig, clock: Clock) -> ImuPair:

@@ -159,7 +159,8 @@ class SessionStatus:
     valve_commands: int = 0
     valve_retries: int = 0
     stream_rates: dict[str, StreamRateFigure] = field(default_factory=dict)  # over the last step, by stream
-    events: deque = field(default_factory=lambda: deque(maxlen=6))
+    events: deque = field(default_factory=lambda: deque(maxlen=6))  # (t_s, level, message, source)
+    event_count: int = 0  # every event so far: a reader of ``events`` can tell which are new
 
 
 @dataclass(frozen=True, repr=False)
@@ -307,7 +308,8 @@ class Session:
 
     def event(self, level: str, source: str, message: str) -> None:
         t_s = self.clock.now()
-        self.status.events.append((t_s, level, message))
+        self.status.events.append((t_s, level, message, source))
+        self.status.event_count += 1
         if self._log is not None:
             self._log.write(Event(t_s=t_s, level=level, source=source, message=message))
 
@@ -582,9 +584,13 @@ class Session:
         self._kept_over_plan = self._kept_so_far()
         kept, _, held_wall_s = self._kept_over_plan
         if held_wall_s > 0.0 and kept is not None:
-            self.event("info", "session", f"x{kept:.1f} kept of x{self._paced.time_scale:g}: "
-                       f"session time waited {held_wall_s:.1f} s of wall time for the host, "
-                       "so the emulated devices lost no samples to it")
+            # Waiting keeps the emulators' streams whole unless the host still read too late.
+            lost = any(figure.below_warning for figure in figures) or self.status.imu_overflows
+            self.event("warning" if lost else "info", "session",
+                       f"x{kept:.1f} kept of x{self._paced.time_scale:g}: session time waited {held_wall_s:.1f} s "
+                       "of wall time for the host, " + (
+                           f"and still {self.status.imu_overflows} IMU FIFO overflow(s) or a stream below 95 % of "
+                           "its rate lost samples" if lost else "so the emulated devices lost no samples to it"))
 
     def _time_scale_kept(self) -> float | None:
         """Session seconds per wall second since the valves were armed."""

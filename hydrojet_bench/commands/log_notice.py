@@ -39,6 +39,26 @@ def warn_if_incomplete(path: Path) -> dict[str, object] | None:
     return condition.as_dict()
 
 
+def warn_if_streams_fell_short(path: Path) -> list[str] | None:
+    """For a session log whose closing stream rates (``/bench/stream_rate``, whole
+    session) say a stream delivered less than 95 % of its configured rate: print each
+    (samples were lost: the figures rest on fewer than configured) and return them for
+    the JSON document. None when every stream kept its rate or the log says nothing."""
+    from ..bench.stream_rates import StreamRateFigure
+    from ..logs import read_log
+    from ..logs.topics import StreamRate
+
+    if Path(path).suffix.lower() != ".mcap":
+        return None
+    figures = [StreamRateFigure(rate.stream, rate.configured_hz, rate.samples, rate.interval_s)
+               for rate in read_log(path, topics=[StreamRate.topic]).on(StreamRate) if rate.whole_session]
+    short = [figure.describe() for figure in figures if figure.configured_hz > 0 and figure.below_warning]
+    for line in short:
+        _warn(f"{path}: the session's {line}: samples were lost, and what rests on that stream has fewer than "
+              "its settings promise")
+    return short or None
+
+
 def warn_if_recorded_elsewhere(path: Path, profile_given: str | None, profile: RigProfile) -> dict[str, str] | None:
     """For a CSV table read with the default ``profile`` (no ``--profile`` given) whose
     comments say another profile wrote it (`write_csv` notes it): gravity, mountings and

@@ -206,10 +206,23 @@ async def _run_session(request, console: Console, live: bool, clipped: frozenset
         loop.remove_signal_handler(signal.SIGTERM)
 
 
+# Event sources whose warnings the command prints itself, before the session or in its
+# end report: printed live too, they would be said twice.
+_SAID_ELSEWHERE = ("request", "calibration", "setup check")
+
+
 def _printer(console: Console, clipped: frozenset[int]):
     last = [-1]
+    events_seen = [0]
 
     def update(status) -> None:
+        # Without the live view its warnings (a FIFO overflow, a stream falling behind, a
+        # step not estimated) would be only in the log.
+        new = min(status.event_count - events_seen[0], len(status.events))
+        events_seen[0] = status.event_count
+        for t_s, level, message, source in list(status.events)[len(status.events) - new:]:
+            if level != "info" and source not in _SAID_ELSEWHERE:
+                console.print(f"[yellow]{level}:[/] {render.plain(message)} ({t_s:.1f} s)", highlight=False)
         # One line per sweep (and per 10 calibration poses, and per clipped step) keeps a
         # log file readable.
         step = status.step
@@ -282,6 +295,9 @@ def _print_outcome(console: Console, warnings: Console, result, model_name: str,
                 for path in write_report(args.report, results, validation_steps, model_name,
                                                  figure_format=args.figure_format):
                     console.print(f"wrote {render.plain(path)}")
+        elif args.report:
+            warnings.print(f"[yellow]warning:[/] no report written to {render.plain(args.report)}: it holds the "
+                           "sweeps' Table II and figures, and this session has no sweep steps")
     log = result.log_path
     console.print("\nnext:")
     # Only what runs on this log: calibrate needs calibration poses, diagnose sweeps too.

@@ -33,7 +33,7 @@ from ..model_choice import ModelDefaults, model_choice
 from . import render
 from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
-from .log_notice import warn_if_incomplete, warn_if_uncalibrated
+from .log_notice import warn_if_incomplete, warn_if_streams_fell_short, warn_if_uncalibrated
 
 # The longest EM gap --max-gap may bridge, s. A slerp across a gap assumes the tip turned
 # steadily in between; a minute already spans twelve of the paper's 5 s steps and three
@@ -74,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
                         f"steps), got {args.max_gap}")
     em, imu, metadata = load_sources(args.input, args.profile)
     log_damage = warn_if_incomplete(args.input)
+    streams_short = warn_if_streams_fell_short(args.input)
     console = render.console_for(args)
     try:
         agreement = sensor_agreement(imu, em, args.max_gap, args.min_hold, args.settle)
@@ -87,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
         render.write_json(args.json, {
             "log": str(args.input), **agreement.as_dict(),
             "online_estimation": None if estimation is None else {"model": model_line, **estimation.as_dict()},
-            "log_damage": log_damage})
+            "log_damage": log_damage, "streams_below_rate": streams_short})
     if args.report:
         from ..analysis.sensor_plots import write_sensor_report
 

@@ -79,8 +79,8 @@ def test_live_view_renders_progress_errors_and_health():
                            disturbance_norm_nm=2.5e-4, em_frames=4000, em_missing=3, imu_samples=1000)
     status.stream_rates["em"] = StreamRateFigure("em", configured_hz=40.0, samples=199, interval_s=5.0)
     status.stream_rates["imu"] = StreamRateFigure("imu", configured_hz=100.0, samples=400, interval_s=5.0)
-    status.events.append((12.0, "warning", "sensor not tracked: tip MISSING"))
-    status.events.append((13.0, "error", "stopped: effect [bold]my[/x].py:Twist: apply failed"))
+    status.events.append((12.0, "warning", "sensor not tracked: tip MISSING", "tracker"))
+    status.events.append((13.0, "error", "stopped: effect [bold]my[/x].py:Twist: apply failed", "session"))
     console = Console(record=True, width=100)
     console.print(LiveView(console, time_scale=25.0, title="test").render(status))
     text = console.export_text()
@@ -88,6 +88,32 @@ def test_live_view_renders_progress_errors_and_health():
                      "4000 frames, 3 incomplete", "sensor not tracked", "ETA 00:24",
                      "effect [bold]my[/x].py:Twist", "em 39.8/40 Hz", "imu 80.0/100 Hz"):
         assert expected in text, (expected, text)
+
+
+def test_without_the_live_view_the_sessions_warnings_are_printed_as_they_come():
+    """A FIFO overflow or a stream falling behind was only in the live view and the log;
+    what the command prints itself (the request's warnings before, calibration and
+    setup checks in its report) is not said twice."""
+    from hydrojet_bench.commands.run import _printer
+
+    console = Console(record=True, width=200)
+    update = _printer(console, frozenset())
+    status = SessionStatus(step_count=3, phase="calibration poses", step_index=0, step=PlanStep((0.05, 0.0, 0.0), -1, 1))
+    for event in [(1.0, "warning", "2 step(s) of the plan ...", "request"), (2.0, "info", "armed", "session"),
+                  (3.0, "warning", "base IMU's FIFO overflowed", "imu"),
+                  (4.0, "warning", "NOT converged", "calibration")]:
+        status.events.append(event)
+        status.event_count += 1
+    update(status)
+    status.events.append((6.0, "warning", "falling behind: em stream", "em"))
+    status.event_count += 1
+    status.step_index = 1
+    update(status)
+    text = console.export_text()
+    assert "warning: base IMU's FIFO overflowed (3.0 s)" in text and "warning: falling behind: em stream" in text
+    assert text.count("FIFO overflowed") == 1
+    for said_elsewhere in ("2 step(s)", "armed", "NOT converged"):
+        assert said_elsewhere not in text
 
 
 def test_a_miswired_rig_stops_before_the_protocol_with_one_line(tmp_path):
