@@ -108,7 +108,7 @@ class CalibrationResult:
     solves them. off_branch: there they settle on other equilibria than the fit followed
     from evaluation to evaluation, and fit the data far worse than the fit saw
     (`rms_orientation_deg_followed`), or cannot be solved: the optimum is one the rod
-    does not reach."""
+    does not reach. poses: how many poses were fitted."""
 
     params: ModelParameters
     names: tuple[str, ...]
@@ -126,6 +126,7 @@ class CalibrationResult:
     at_bound: tuple[str, ...] = ()
     off_branch: bool = False
     rms_orientation_deg_followed: float | None = None
+    poses: int = 0
 
     @property
     def branch_note(self) -> str:
@@ -455,6 +456,7 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         else None,
         at_bound=tuple(name for name, value, lower, upper in zip(names, values, *bounds)
                        if on_bound(value, lower, upper, _default(model, name))),
+        poses=len(fitted_indices),
     )
 
 

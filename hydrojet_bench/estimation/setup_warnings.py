@@ -53,9 +53,14 @@ def setup_warnings(names: tuple[str, ...], values: tuple[float, ...],
 
 def calibration_warnings(model: ShootingModel, result: CalibrationResult) -> list[str]:
     """What ``model``'s calibration ``result`` must not keep quiet (what `calibrate` and a
-    session's own calibration show): an unconverged fit, a value on its bound, and
-    `setup_warnings`."""
+    session's own calibration show): too few poses, an unconverged fit, a value on its
+    bound, and `setup_warnings`."""
     warnings = []
+    if 0 < result.poses < len(result.names):
+        # Each pose adds a few residual rows, but poses alike (one jet at a time) pin few
+        # directions: two poses for nine parameters ended with E0 on its bound.
+        warnings.append(f"only {result.poses} poses for {len(result.names)} parameters: too few to tell them apart "
+                        "(the paper fits 40), so what follows may be that alone")
     if not result.converged:
         warnings.append(f"the fit is {result.convergence}: these values are not an optimum; check the profile's "
                         "starting values, or diagnose the data")

@@ -292,3 +292,16 @@ def test_a_fit_whose_steps_stalled_short_of_the_optimum_is_restarted_there():
     assert "restarted once where its steps had stalled" in result.convergence
     value, error = result.values[-1], result.standard_errors[-1]
     assert abs(value - 0.3) <= 3.0 * error and result.rms_orientation_deg_after < 0.2
+
+
+def test_fewer_poses_than_parameters_are_said_first():
+    """Two calibration poses of a session fitted nine parameters and put E0 on its bound,
+    with a hint at miswired jets: the hint was the few poses."""
+    from hydrojet_bench.estimation.setup_warnings import calibration_warnings
+
+    model = CosseratModel()
+    few = calibrate(model, poses(count=4, angle_noise_deg=0.7), INITIAL)
+    assert few.poses == 4
+    assert calibration_warnings(model, few)[0].startswith("only 4 poses for 9 parameters: too few to tell them apart")
+    enough = calibrate(model, poses(count=12, angle_noise_deg=0.7), INITIAL)
+    assert not any(warning.startswith("only") for warning in calibration_warnings(model, enough))
