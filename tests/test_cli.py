@@ -210,6 +210,7 @@ def test_a_step_above_the_valves_limit_is_predicted_at_the_clipped_force_with_a_
     assert "session done: 1/1 steps" in printed.out and warning not in " ".join(printed.out.split())
     events = read_log(tmp_path / "x.mcap", topics=["/events"]).messages
     assert any(e.level == "warning" and e.message.startswith(warning) for e in events)
+    assert events[-1].message == "closed: the controller acknowledged ALL_OFF"
     commands = [m.jet_forces_n for m in read_log(tmp_path / "x.mcap", topics=["/valves/command"]).messages]
     assert (0.15, 0.0, 0.0) in [tuple(c) for c in commands] and max(max(c) for c in commands) == 0.15
     (step,) = read_log(tmp_path / "x.mcap", topics=["/bench/step"]).messages

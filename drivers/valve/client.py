@@ -151,6 +151,9 @@ class ValveController:
         self.timeouts = 0  # reply timeouts (each retried or raised)
         self.heartbeat_failures = 0
         self.ignored_frames = 0  # valid frames that answered nothing we asked
+        # After close: None if ALL_OFF was acknowledged, else why not (the firmware's
+        # watchdog then closes the valves once the host falls silent).
+        self.all_off_failure: str | None = None
 
     # ------------------------------------------------------------------ lifecycle
     async def open(self) -> None:
@@ -197,11 +200,14 @@ class ValveController:
         try:
             await _stop_task(self._heartbeat)
             self._heartbeat = None
-            if send_all_off and self._link_error is None:
+            if send_all_off and self._link_error is not None:
+                self.all_off_failure = f"the link had failed ({self._link_error})"
+            elif send_all_off:
                 try:
                     await self._request(AllOff(), allow_closed=True)
                 except (ValveError, TransportError) as exc:
                     error = exc
+                    self.all_off_failure = str(exc) or type(exc).__name__
                     log.warning("ALL_OFF on close failed (%s); firmware watchdog will close the valves", exc)
         finally:
             await _stop_task(self._reader)

@@ -325,35 +325,45 @@ class Session:
 
     async def _run_rig(self) -> int:
         request = self.request
-        async with open_rig(request.profile, request.settings, self.clock, seed=request.seed,
-                            before_arming=self._load_kernels, on_event=self.event) as rig, \
-                self._all_off_on_record():
-            self._devices = rig.simulated
-            self._armed = (self.clock.now(), time.monotonic())
-            async with asyncio.TaskGroup() as group:
-                streams = [group.create_task(self._em_stream(rig.tracker), name="em-stream"),
-                           group.create_task(self._estimate_steps(), name="estimation")]
-                if self._paced is not None:
-                    streams.append(group.create_task(self._paced.keep_pace(), name="session-clock"))
-                imu_stream = None
-                if rig.imus is not None:
-                    imu_stream = group.create_task(self._imu_stream(rig.imus), name="imu-stream")
-                    streams.append(imu_stream)
-                try:
-                    completed = await self._play(rig.valves)
-                    if imu_stream is not None:
-                        # Its last drain (within one drain period) before the rates are taken.
-                        self._stopping = True
-                        await imu_stream
-                    self._log_overall_rates()
-                    return completed
-                finally:
-                    # Python 3.11's wait_for can swallow a cancellation that arrives as its
-                    # inner future completes (the IMU reads complete all the time), so the
-                    # streams also stop on this flag.
+        valves = None
+        try:
+            async with open_rig(request.profile, request.settings, self.clock, seed=request.seed,
+                                before_arming=self._load_kernels, on_event=self.event) as rig, \
+                    self._all_off_on_record():
+                valves = rig.valves
+                return await self._run_armed(rig)
+        finally:
+            if valves is not None:
+                self._log_valves_closed(valves)
+
+    async def _run_armed(self, rig) -> int:
+        """The plan on the opened, armed rig, its streams beside it."""
+        self._devices = rig.simulated
+        self._armed = (self.clock.now(), time.monotonic())
+        async with asyncio.TaskGroup() as group:
+            streams = [group.create_task(self._em_stream(rig.tracker), name="em-stream"),
+                       group.create_task(self._estimate_steps(), name="estimation")]
+            if self._paced is not None:
+                streams.append(group.create_task(self._paced.keep_pace(), name="session-clock"))
+            imu_stream = None
+            if rig.imus is not None:
+                imu_stream = group.create_task(self._imu_stream(rig.imus), name="imu-stream")
+                streams.append(imu_stream)
+            try:
+                completed = await self._play(rig.valves)
+                if imu_stream is not None:
+                    # Its last drain (within one drain period) before the rates are taken.
                     self._stopping = True
-                    for task in streams:
-                        task.cancel()
+                    await imu_stream
+                self._log_overall_rates()
+                return completed
+            finally:
+                # Python 3.11's wait_for can swallow a cancellation that arrives as its
+                # inner future completes (the IMU reads complete all the time), so the
+                # streams also stop on this flag.
+                self._stopping = True
+                for task in streams:
+                    task.cancel()
 
     @contextlib.asynccontextmanager
     async def _all_off_on_record(self):
@@ -364,6 +374,15 @@ class Session:
         finally:
             self._log.write(ValveCommand(t_s=self.clock.now(), command="ALL_OFF", duties_permille=(0.0, 0.0, 0.0),
                                          jet_forces_n=(0.0, 0.0, 0.0)))
+
+    def _log_valves_closed(self, valves) -> None:
+        """Whether the controller acknowledged the ALL_OFF its driver sent on closing."""
+        if valves.all_off_failure is None:
+            self.event("info", "valves", "closed: the controller acknowledged ALL_OFF")
+        else:
+            watchdog_ms = self.request.settings.valves.watchdog_ms
+            self.event("warning", "valves", f"ALL_OFF was not acknowledged ({valves.all_off_failure}): the "
+                       f"controller's watchdog closes the valves {watchdog_ms:g} ms after the host falls silent")
 
     async def _load_kernels(self) -> None:
         """Loads the compiled kernels a session will call, before any valve is armed: the

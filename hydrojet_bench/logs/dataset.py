@@ -31,8 +31,9 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
 
     profile: a `RigProfile`, a TOML path or a shipped profile's name; None uses the
         profile embedded in the log.
-    A truncated or interrupted log gives the samples before the cut, less those of a
-    step the cut interrupted (one without its /bench/step record). Raises `UserError` naming the file
+    A truncated, interrupted or damaged log gives the samples of the steps that
+    finished (those with a /bench/step record; without any, all but the run the cut
+    interrupted). Raises `UserError` naming the file
     if there are no samples of that source, a sample is malformed or breaks the CSV
     contract, or no profile is to be had.
     """
@@ -40,15 +41,16 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
     contents = read_log(path, topics=[SAMPLE_TOPIC, Step.topic])
     samples = contents.on(Sample)
     rows = [sample for sample in samples if sample.source == source]
+    # A step cut while it settled (a session stopped by Ctrl-C or SIGTERM, a truncated
+    # log, a damaged chunk that took its end) is no equilibrium, and would be fitted as
+    # one: only steps a /bench/step record says finished are kept.
     finished = {(step.sweep, step.step) for step in contents.on(Step)}
-    if rows and (contents.truncated or finished):
-        # Cut (truncated, or a session stopped by Ctrl-C or SIGTERM) while its last step
-        # settled: those samples are no equilibrium (no /bench/step record says it
-        # finished), and would be fitted as one.
+    if finished:
+        rows = [row for row in rows if (row.sweep, row.step) in finished]
+    elif contents.truncated and rows:
         last = (rows[-1].sweep, rows[-1].step)
-        if last not in finished:
-            while rows and (rows[-1].sweep, rows[-1].step) == last:
-                rows.pop()
+        while rows and (rows[-1].sweep, rows[-1].step) == last:
+            rows.pop()
     if not rows:
         sources = sorted({sample.source for sample in samples})
         found = f"it has samples from {', '.join(sources)} only" if sources else f"it has no {SAMPLE_TOPIC} messages"

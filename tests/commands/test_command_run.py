@@ -61,6 +61,9 @@ def test_a_signal_stops_the_session_cleanly(tmp_path, signal_number, exit_code):
     # command, but no command after the interruption may open a jet.
     interrupted_at = next(m.t_s for m in contents.on(Event) if "interrupted" in m.message)
     assert all(max(m.jet_forces_n) == 0 for m in contents.on(ValveCommand) if m.t_s > interrupted_at)
+    # ...and the controller's acknowledgement of it, logged after the rig closed.
+    assert [m.message for m in contents.on(Event) if m.source == "valves"][-1] == ("closed: the controller "
+                                                                                  "acknowledged ALL_OFF")
 
 
 def test_run_reports_a_bad_plan_file_without_traceback(tmp_path):

@@ -154,11 +154,12 @@ def test_commands_on_cut_and_damaged_logs(recorded: Recorded, command: str, tmp_
         assert digest(variant.path) == before, (command, variant.name)
         assert "Traceback" not in captured.err + captured.out, (command, variant.name)
         if code == 2:
-            # One error line naming the file, after at most the notice about the log.
+            # One error line naming the file, last, after the notices about the log (what it
+            # lost, and what that did to the steps left, such as a step cut while settling).
             lines = captured.err.strip().splitlines()
             errors = [line for line in lines if line.startswith("error: ")]
             assert len(errors) == 1 and variant.name in errors[0], (command, variant.name, captured.err)
-            assert len(lines) == 1 or (len(lines) == 2 and lines[0].startswith("warning: ")), captured.err
+            assert lines[-1] == errors[0] and all(line.startswith("warning: ") for line in lines[:-1]), captured.err
             continue
         # A calibration on what is left may be short of poses to converge or pin a value on
         # its bound: it says so and exits 3 (its warnings are not the log's).

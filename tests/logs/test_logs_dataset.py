@@ -99,15 +99,16 @@ def test_the_embedded_profile_is_used_unless_one_is_given(tmp_path: Path) -> Non
 @pytest.mark.parametrize("last_step_finished", [True, False])
 def test_a_truncated_log_gives_the_samples_before_the_cut(tmp_path: Path, last_step_finished: bool) -> None:
     """...less those of a step the cut interrupted: rows 35-39 are step 7, whose
-    /bench/step record (written once it settled) is there or not."""
+    /bench/step record (written once it settled, as for the steps before) is there or
+    not."""
     path = tmp_path / "run.mcap"
     rows = recorded_rows()
     log = LogWriter(path, metadata=SIM_METADATA, flush_interval_s=1e6)
     for i in range(40):
         log.write(sample(rows, i))
-    if last_step_finished:
-        log.write(msgspec.structs.replace(EXAMPLES["/bench/step"], t_s=float(rows.time_s[39]),
-                                          sweep=int(rows.sweep[39]), step=int(rows.step[39])))
+        if i % 5 == 4 and (i < 39 or last_step_finished):
+            log.write(msgspec.structs.replace(EXAMPLES["/bench/step"], t_s=float(rows.time_s[i]),
+                                              sweep=int(rows.sweep[i]), step=int(rows.step[i])))
     log.flush()
     log.write(sample(rows, 40))  # never flushed: lost
     cut = tmp_path / "cut.mcap"
@@ -131,6 +132,19 @@ def test_a_step_a_stopped_session_left_unfinished_is_not_analysed(tmp_path: Path
                                                   sweep=int(rows.sweep[i]), step=int(rows.step[i])))
     assert not read_log(tmp_path / "stopped.mcap").truncated
     assert_same(dataset_from_log(tmp_path / "stopped.mcap"), rows.select(np.arange(35)))
+
+
+def test_a_step_whose_end_a_damaged_chunk_took_is_not_analysed(tmp_path: Path) -> None:
+    """A flipped byte costs its chunk: a step whose end (and /bench/step record) was in
+    it keeps only samples from before, the rod still moving; only finished steps count."""
+    rows = recorded_rows()
+    with LogWriter(tmp_path / "damaged.mcap", metadata=SIM_METADATA) as log:
+        for i in range(60):
+            log.write(sample(rows, i))
+            if i % 5 == 4 and not 20 <= i < 30:  # the records of steps 4 and 5 lost with their chunk
+                log.write(msgspec.structs.replace(EXAMPLES["/bench/step"], t_s=float(rows.time_s[i]),
+                                                  sweep=int(rows.sweep[i]), step=int(rows.step[i])))
+    assert_same(dataset_from_log(tmp_path / "damaged.mcap"), rows.select(np.r_[0:20, 30:60]))
 
 
 def test_log_problems_name_the_file(tmp_path: Path) -> None:

@@ -67,6 +67,7 @@ def test_open_arms_and_commands_reach_the_plant(run_async, backend: str) -> None
                 assert bench.plant.valve_duties_permille == (0, 0, 0)
                 await valves.set_duties((1, 1, 1))
             assert bench.plant.valve_duties_permille == (0, 0, 0)  # ALL_OFF on exit
+            assert valves.all_off_failure is None  # ...and acknowledged
             assert bench.emulator.watchdog_trips == 0
 
     run_async(main)
@@ -381,6 +382,7 @@ def test_mock_close_without_all_off_reply_raises_after_releasing(run_async) -> N
         with pytest.raises(ValveTimeoutError, match="ALL_OFF"):
             await valves.close()
         mock.assert_done()
+        assert "ALL_OFF" in valves.all_off_failure  # said, for the session's log
         await valves.close()  # idempotent once closed
 
     run_async(main)
