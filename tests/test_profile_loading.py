@@ -195,6 +195,7 @@ def test_the_shipped_physical_rig_with_a_misspelt_table_does_not_load(tmp_path: 
     ("[session]\ntime_scale = 1e-300\n", "session.time_scale", "must be a number >= 1 and <= 1000, got 1e-300"),
     ("[session]\ntime_scale = 0.5\n", "session.time_scale", "must be a number >= 1 and <= 1000, got 0.5"),
     ("[session]\nsettle_s = 1e300\n", "session.settle_s", "must be a number > 0 and <= 86400, got 1e+300"),
+    ("[session]\nflush_interval_s = 1e9\n", "session.flush_interval_s", "must be a number > 0 and <= 60, got 1000000000.0"),
     ("[transports]\nimu_bus = -1\n", "transports.imu_bus", "I2C bus number"),
     ('[tracker]\ntools = ["base", "base"]\n', "tracker.tools", 'each of "base" and "tip" once'),
     ("[imu]\nbase_address = 0x69\n", "imu.tip_address", "must differ from imu.base_address"),

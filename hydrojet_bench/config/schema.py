@@ -368,6 +368,9 @@ MAX_TIME_SCALE = 1000.0
 MIN_TIME_SCALE = 1.0
 
 
+MAX_FLUSH_INTERVAL_S = 60.0
+
+
 class SessionTable(Table, kw_only=True):
     # hold each command this long, session s (the paper: 5 s; at most a day, as in plans)
     settle_s: Annotated[float, msgspec.Meta(gt=0.0, le=MAX_SETTLE_S)] = 5.0
@@ -378,8 +381,9 @@ class SessionTable(Table, kw_only=True):
     # and indexes each chunk on its writer thread, which holds the interpreter for part
     # of it, so a chunk must stay small in wall time too: on the simulated rig at 25x a
     # flush every 0.25 s of wall time (6 s of session data) left the tracker 97.3-98.1 %
-    # of its frames, against 98.6-98.8 % with one every 10 ms.
-    flush_interval_s: Positive = 0.25
+    # of its frames, against 98.6-98.8 % with one every 10 ms. At most a minute: a crash
+    # loses what was not flushed, and the log is what a session is for.
+    flush_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=MAX_FLUSH_INTERVAL_S)] = 0.25
 
     def __post_init__(self) -> None:
         if self.window_s > self.settle_s:
