@@ -244,6 +244,19 @@ def _printer(console: Console, clipped: frozenset[int]):
     return update
 
 
+def _diagnosable(steps) -> bool:
+    """Whether `diagnose` can split these steps (sweeps to hold out, enough to train on):
+    a plan of short ramps has sweeps but too few training steps, and "next" promises
+    commands that run."""
+    from ..analysis.diagnosis.split import split_session
+
+    try:
+        split_session(steps)
+    except UserError:
+        return False
+    return True
+
+
 def _timing(result) -> str:
     """Session and wall time from the arming of the valves, then the set-up before it:
     a first run compiles the kernels (seconds of wall time, and on a simulated rig
@@ -302,12 +315,12 @@ def _print_outcome(console: Console, warnings: Console, result, model_name: str,
     console.print("\nnext:")
     # Only what runs on this log: calibrate needs calibration poses, diagnose sweeps too.
     poses = steps is not None and bool((steps.sweep == -1).any())
-    sweeps = steps is not None and bool((steps.sweep >= 0).any())
+    diagnosable = steps is not None and _diagnosable(steps)
     for line in (f"{command('replay', log, '--online')}  # re-run the estimation offline",
                  *([f"{command('calibrate', log, '-o', 'p.toml')}  # calibrate on the logged poses",
                     f"{command('compare', log, '--params', 'p.toml', '--online')}  # Table II from the log"]
                    if poses else []),
                  *([f"{command('diagnose', log, '--model', model_name)}  # which physical effect is missing?"]
-                   if poses and sweeps else []),
+                   if diagnosable else []),
                  f"{command('sensors', log, '--report', 'sensors/')}  # IMU versus EM tracker"):
         console.print(f"  {line}", highlight=False, markup=False, soft_wrap=True)

@@ -165,3 +165,18 @@ def test_a_tilted_field_generator_warns_with_both_gravity_vectors(tmp_path):
     assert "level check" not in done.stdout
     (level,) = [m for m in read_log(log_path).on(SetupCheck) if m.check == "level"]
     assert level.status == "warn" and abs(level.values["angle_deg"] - 3.0) < 0.2
+
+
+def test_next_offers_diagnose_only_on_steps_it_can_split():
+    """The imu-vs-em plan has sweeps (its ramps) but 8 training steps: `diagnose` on its
+    log said it needs 10, after run's "next" had offered it."""
+    from hydrojet_bench.commands.run import _diagnosable
+    from hydrojet_bench.plans import imu_versus_em_plan, paper_protocol
+    from hydrojet_bench.profile import load_profile
+    from hydrojet_bench.twin import DigitalTwin, TwinConfig
+
+    profile = load_profile("sim")
+    twin = DigitalTwin(TwinConfig.from_profile(profile))
+    paper = twin.run_plan(paper_protocol(), record_window_s=1.0).to_dataset(profile).quasistatic_steps()
+    ramps = twin.run_plan(imu_versus_em_plan(), record_window_s=1.0).to_dataset(profile).quasistatic_steps()
+    assert _diagnosable(paper) and not _diagnosable(ramps)
