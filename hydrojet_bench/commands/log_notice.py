@@ -13,7 +13,6 @@ import os
 from pathlib import Path
 
 import numpy as np
-
 from rich.console import Console
 
 from ..data.csv_io import recorded_profile, recorded_with
