@@ -19,7 +19,7 @@ Jets only push: every force is >= 0 N.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
 
@@ -163,15 +163,32 @@ class Plan:
         return Plan(tuple(steps)), tuple(changed)
 
 
+def _steps_named(indices: Sequence[int]) -> str:
+    """"N step(s) of the plan (a, b, ...)": the first five, 1-based."""
+    shown = ", ".join(str(index + 1) for index in indices[:5]) + (", ..." if len(indices) > 5 else "")
+    return f"{len(indices)} step(s) of the plan ({shown})"
+
+
 def clipped_warning(clipped: tuple[int, ...], limits: tuple[float, ...]) -> str:
     """What `Plan.clipped` changed, in words ("" for nothing): the steps (1-based) and
     the valves' limits (N per jet)."""
     if not clipped:
         return ""
-    shown = ", ".join(str(index + 1) for index in clipped[:5]) + (", ..." if len(clipped) > 5 else "")
-    return (f"{len(clipped)} step(s) of the plan ({shown}) ask more than the valves give "
+    return (f"{_steps_named(clipped)} ask more than the valves give "
             f"({', '.join(f'{limit:g}' for limit in limits)} N per jet): they are played, logged and predicted "
             "at the clipped force")
+
+
+def short_steps_warning(plan: Plan, window_s: float) -> str:
+    """The plan's steps that hold no longer than the session's averaging window, in words
+    ("" for none): their settled states take in the rod still moving after the jets
+    changed (a plan of 0.3 s steps on the nominal twin: Table II 33 deg)."""
+    short = [index for index, step in enumerate(plan.steps) if step.settle_s <= window_s]
+    if not short:
+        return ""
+    return (f"{_steps_named(short)} hold no longer than the {window_s:g} s each step's settled state is averaged "
+            "over (session.window_s): their errors take in the rod still moving, which the quasistatic models "
+            "read as model error; hold each command longer")
 
 
 def _resultant_to_jets(resultant_xy_n: np.ndarray) -> np.ndarray:

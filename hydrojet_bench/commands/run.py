@@ -27,7 +27,7 @@ from ..config.schema import MAX_TIME_SCALE, MIN_TIME_SCALE
 from ..errors import UserError
 from ..files import check_writable_target, create_numbered, make_folder_for
 from ..model_choice import ModelDefaults, model_choice
-from ..plans import clipped_warning
+from ..plans import clipped_warning, short_steps_warning
 from ..profile import load_profile
 from . import render
 from .common import add_model_arguments, check_seed
@@ -99,7 +99,7 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
     limits = tuple(table.max_force_n for table in settings.valve_calibrations())
     plan, clipped = choose_plan(args.plan, settle_s=settings.session.settle_s).clipped(limits)
     clip_warning = clipped_warning(clipped, limits)
-    plan_warnings = tuple(filter(None, (clip_warning, _short_steps_warning(plan, settings.session.window_s))))
+    plan_warnings = tuple(filter(None, (clip_warning, short_steps_warning(plan, settings.session.window_s))))
     choice = model_choice(args, ModelDefaults(settings.estimator.model, tuple(settings.estimator.effects),
                                               origin=f"{profile.source} (estimator.effects)"))
     model, requested = choice.model, choice.requested
@@ -149,19 +149,6 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
         return 143
     _print_outcome(console, progress, result, model.name, args)
     return 0
-
-
-def _short_steps_warning(plan, window_s: float) -> str:
-    """The plan's steps that hold no longer than the session's averaging window, in words
-    ("" for none): their settled states take in the rod still moving after the jets
-    changed (a plan of 0.3 s steps on the nominal twin: Table II 33 deg)."""
-    short = [index for index, step in enumerate(plan.steps) if step.settle_s <= window_s]
-    if not short:
-        return ""
-    shown = ", ".join(str(index + 1) for index in short[:5]) + (", ..." if len(short) > 5 else "")
-    return (f"{len(short)} step(s) of the plan ({shown}) hold no longer than the {window_s:g} s each step's "
-            "settled state is averaged over (session.window_s): their errors take in the rod still moving, "
-            "which the quasistatic models read as model error; hold each command longer")
 
 
 def _foxglove(address: str | None) -> contextlib.AbstractContextManager:
