@@ -182,6 +182,8 @@ def test_the_shipped_physical_rig_with_a_misspelt_table_does_not_load(tmp_path: 
 
 @pytest.mark.parametrize(("text", "key", "expected"), [
     ("[session]\nsettle_s = 1.0\nwindow_s = 2.0\n", "session.window_s", "must not exceed session.settle_s"),
+    ("[session]\nwindow_s = 1e-9\n", "session.window_s",
+     "= 1e-09 s holds fewer than two samples of the slowest stream (imu.rate_hz = 40): make it at least 0.05 s"),
     ('[transports]\nvalves = "COM3"\n', "transports.valves", 'must be "sim", "pty" or a transport URL'),
     ('[transports]\nvalves = "tcp://10.0.0.2:5000"\n', "transports.valves",
      "is not a usable transport URL: unsupported transport scheme 'tcp'"),

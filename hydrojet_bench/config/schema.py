@@ -506,6 +506,14 @@ class RigConfig(Table, kw_only=True):
     estimator: EstimatorTable = msgspec.field(default_factory=EstimatorTable)
     twin: TwinTable = msgspec.field(default_factory=TwinTable)
 
+    def __post_init__(self) -> None:
+        # A step's value is the mean of its last window_s; a window that holds no sample
+        # of a stream leaves every step without that sensor (two samples: one may be lost).
+        slowest_hz, stream = min((self.tracker.rate_hz, "tracker.rate_hz"), (self.imu.rate_hz, "imu.rate_hz"))
+        if self.session.window_s < 2.0 / slowest_hz:
+            raise ValueError(f"session.window_s = {self.session.window_s:g} s holds fewer than two samples of the "
+                             f"slowest stream ({stream} = {slowest_hz:g}): make it at least {2.0 / slowest_hz:g} s")
+
     def valve_calibrations(self) -> tuple[JetCalibration, ...]:
         """The valve client's force -> duty table per jet."""
         return self.valves.calibrations(self.jets)

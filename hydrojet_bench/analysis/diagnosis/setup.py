@@ -34,8 +34,9 @@ SETUP, PHYSICS = "setup", "physics"
 # What separates a setup error from the physics it ties with: shown beside the tie.
 SEPARATING_MEASUREMENT = {
     "tracker_tilt": "hold the jets off and compare the base IMU's gravity with the profile's (run's level check)",
-    "base_sensor_mounting": "turn the clamp a known angle about the rod axis: a base sensor error turns the "
-                            "reading with it, a jet ring error does not",
+    "base_sensor_mounting": "remount the base sensor turned a known angle in the clamp and diagnose again: a "
+                            "base sensor error changes by that angle, a physical effect (a turned jet ring or "
+                            "tip sensor) does not",
     "jet_wiring": "fire each jet alone and watch which side the tip moves to (run's wiring check)",
     "jet_force_sign": "fire each jet alone and watch which side the tip moves to (run's wiring check)",
     "jet_force_unit": "measure one jet's force at a known duty with a force gauge and compare it with the valve "
