@@ -18,6 +18,8 @@ from hydrojet_bench.config.loading import PROFILES_DIR
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.files import check_folder_target
 from hydrojet_bench.logs import read_log
+from hydrojet_bench.params import PARAMETER_NAMES, ModelParameters, get_parameter
+from hydrojet_bench.params_io import ParameterFile, write_parameter_file
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
@@ -68,6 +70,8 @@ def test_user_mistakes_are_one_line_without_traceback(tmp_path):
 
 
 SIM_PROFILE = (PROFILES_DIR / "sim.toml").read_text()
+# A parameter file's values at the nominal parameters.
+NOMINAL = {name: get_parameter(ModelParameters(), name) for name in PARAMETER_NAMES}
 TWO_STEPS = ("[[step]]\nq1 = 0.05\nq2 = 0.0\nq3 = 0.0\nsettle_s = 2.0\n"
              "[[step]]\nq1 = 0.0\nq2 = 0.05\nq3 = 0.0\nsettle_s = 2.0\n")
 
@@ -184,16 +188,28 @@ def test_calibrate_without_calibration_poses_says_so(tmp_path, capsys):
     assert message.startswith(f"{data}: no calibration poses (steps of sweep -1) to fit on"), message
 
 
-def test_a_plan_of_steps_shorter_than_the_averaging_window_is_warned_before_it_runs(tmp_path, capsys):
+def test_a_plan_of_steps_shorter_than_the_averaging_window_is_warned_before_and_after_it_runs(tmp_path, capsys):
     plan = tmp_path / "plan.csv"
     plan.write_text("q1,q2,q3,settle_s\n0.05,0,0,0.3\n0,0.05,0,5\n")
+    log = tmp_path / "x.mcap"
     assert main(["run", "--plan", str(plan), "--no-live", "--time-scale", "20", "--no-calibration",
-                 "--log", str(tmp_path / "x.mcap")]) == 0
+                 "--log", str(log)]) == 0
     warning = ("1 step(s) of the plan (1) hold no longer than the 1 s each step's settled state is averaged over "
                "(session.window_s)")
-    assert f"warning: {warning}" in " ".join(capsys.readouterr().err.split())
-    events = read_log(tmp_path / "x.mcap", topics=["/events"]).messages
+    turning = "in 1 of 2 steps the tip was still turning (by more than 0.25 deg) over the end of its hold"
+    err = " ".join(capsys.readouterr().err.split())
+    assert f"warning: {warning}" in err and turning in err
+    events = read_log(log, topics=["/events"]).messages
     assert any(e.level == "warning" and e.message.startswith(warning) for e in events)
+    # The log's settled steps say which step was no equilibrium, so that `compare` on the
+    # log (which predicts the session's own steps) says it too.
+    assert [step.flags for step in read_log(log, topics=["/bench/step"]).messages] == [16, 0]
+    params = tmp_path / "p.toml"
+    write_parameter_file(params, ParameterFile(model="cosserat", effects=("gravity",), parameters=NOMINAL))
+    assert main(["compare", str(log), "--params", str(params), "--json", str(tmp_path / "c.json")]) == 0
+    assert turning in " ".join(capsys.readouterr().err.split())
+    assert json.loads((tmp_path / "c.json").read_text())["unsettled_steps"] == {
+        "count": 1, "steps": 2, "window_s": None, "trend_deg": 0.25}
 
 
 def test_a_step_above_the_valves_limit_is_predicted_at_the_clipped_force_with_a_warning(tmp_path, capsys):

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data.dataset import Dataset
+from ..data.dataset import Dataset, SampleFlag
 from ..errors import ConvergenceError, UserError
 from ..estimation.online import OnlineSettings
 from ..estimation.path import PathPredictor, StepPrediction
@@ -84,6 +84,9 @@ def read_session(path: Path, profile: RigProfile | str | Path | None = None) -> 
                         base_position_m=column("base_position_m") if with_positions else None,
                         tip_position_m=column("tip_position_m") if with_positions else None,
                         sweep=np.array([row.sweep for row in records]), step=np.array([row.step for row in records]),
+                        # The live estimator used every row; of its flags only whether the tip
+                        # still turned says something the analysis must repeat.
+                        flags=np.array([row.flags for row in records], dtype=np.int64) & int(SampleFlag.UNSETTLED),
                         profile=rig, source=str(path))
     except ValueError as error:
         raise UserError(f"{path}: {STEP_TOPIC} messages are not complete settled steps ({error})") from None

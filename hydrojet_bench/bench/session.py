@@ -735,6 +735,7 @@ class Session:
             tip_orientation=floats(settled.tip_orientation[0]),
             base_position_m=None if positions is None else floats(settled.base_position_m[0]),
             tip_position_m=None if positions is None else floats(settled.tip_position_m[0]),
+            flags=int(settled.flags[0]),
         ))
         if step.sweep == CALIBRATION_SWEEP and self.request.calibrate:
             self._calibration_rows.append(settled)

@@ -25,7 +25,7 @@ from ..analysis.compare import Comparison, compare_methods
 from ..analysis.diagnosis import NoiseFloor, estimate_noise_floor
 from ..analysis.diagnosis.fitting import scored_as_diagnosed
 from ..analysis.metrics import ErrorSummary
-from ..data.dataset import Dataset
+from ..data.dataset import STEP_WINDOW_S, Dataset
 from ..errors import UserError
 from ..estimation import OnlineSettings
 from ..model_choice import ModelChoice, choose_model, model_choice
@@ -89,7 +89,9 @@ def run(args: argparse.Namespace) -> int:
     log_damage = warn_if_incomplete(args.input)
     profile_mismatch = warn_if_recorded_elsewhere(args.input, args.profile, profile)
     single_sample_steps = warn_if_unsettled(args.input, steps, log_damage)
-    unsettled_steps = warn_if_unsettled_steps(args.input, validation)
+    # A session log's steps are the session's own, each averaged over its session.window_s.
+    unsettled_steps = warn_if_unsettled_steps(args.input, validation,
+                                              None if Path(args.input).suffix.lower() == ".mcap" else STEP_WINDOW_S)
 
     def evaluate(choice: ModelChoice) -> Evaluation:
         params = choice.parameters(profile.model_parameters())

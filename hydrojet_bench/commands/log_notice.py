@@ -92,20 +92,24 @@ def warn_if_unsettled(path: Path, steps: Dataset, log_damage: dict[str, object] 
     return {"count": single, "steps": len(steps)}
 
 
-def warn_if_unsettled_steps(path: Path, steps: Dataset) -> dict[str, object] | None:
+def warn_if_unsettled_steps(path: Path, steps: Dataset,
+                            window_s: float | None = STEP_WINDOW_S) -> dict[str, object] | None:
     """For steps whose tip was still turning within their averaging window
     (`SampleFlag.UNSETTLED`: commands held too briefly, or a plan of half-second ramps):
     print how many and return that for the JSON document; None when there are none.
     Their averages are no equilibria, which a quasistatic model reads as its own error:
-    on the nominal twin, steps of 0.3 s gave a Table II of 33 deg."""
+    on the nominal twin, steps of 0.3 s gave a Table II of 33 deg. window_s: the window
+    the steps were averaged over, s (None: a session's own steps, each averaged over
+    session.window_s or its hold if shorter)."""
     turning = int(np.count_nonzero(steps.flags & int(SampleFlag.UNSETTLED)))
     if not turning:
         return None
+    window = f"the last {window_s:g} s" if window_s is not None else "the end of its hold"
     _warn(f"{path}: in {turning} of {len(steps)} steps the tip was still turning (by more than "
-          f"{UNSETTLED_TREND_DEG:g} deg) over the last {STEP_WINDOW_S:g} s, which each step's settled state is "
+          f"{UNSETTLED_TREND_DEG:g} deg) over {window}, which each step's settled state is "
           "averaged over: they are no equilibria, and the quasistatic models read the motion as model error; "
           "hold each command longer (the paper holds 5 s)")
-    return {"count": turning, "steps": len(steps), "window_s": STEP_WINDOW_S, "trend_deg": UNSETTLED_TREND_DEG}
+    return {"count": turning, "steps": len(steps), "window_s": window_s, "trend_deg": UNSETTLED_TREND_DEG}
 
 
 def warn_if_uncalibrated(choice: ModelChoice) -> tuple[str, ...]:

@@ -263,6 +263,7 @@ def _print_outcome(console: Console, warnings: Console, result, model_name: str,
     file does not hide them."""
     from ..analysis.compare import compare_steps
     from .compare import print_tables
+    from .log_notice import warn_if_unsettled_steps
 
     for check in result.checks:
         if check.status != "pass":
@@ -280,6 +281,8 @@ def _print_outcome(console: Console, warnings: Console, result, model_name: str,
             console.print(f"[dim]{rate.describe()}[/]", highlight=False)
     estimates = result.estimates
     steps = result.steps
+    if steps is not None:
+        warn_if_unsettled_steps(result.log_path, steps, None)
     if steps is None or not estimates or len(estimates) != len(steps):
         warnings.print("[yellow]warning: no complete set of estimated steps to compare[/]")
     else:

@@ -125,6 +125,8 @@ class Step(LogRecord, kw_only=True):
     base_position_m: Annotated[Float3 | None, Meta(description="averaged base sensor position, tracker frame, "
                                                                "m")] = None
     tip_position_m: Annotated[Float3 | None, Meta(description="averaged tip sensor position, tracker frame, m")] = None
+    flags: Annotated[int, Meta(ge=0, description="SampleFlag bits of the averaged row (16: the tip still turned "
+                                                 "within the averaging window)")] = 0
 
 
 class ModelPrediction(LogRecord, kw_only=True):
