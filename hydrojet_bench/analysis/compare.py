@@ -90,10 +90,14 @@ def compare_steps(predicted: Sequence[StepPrediction], steps: Dataset) -> dict[s
 
 
 def compare_methods(model: ShootingModel, params: ModelParameters, steps: Dataset,
-                    online: OnlineSettings | None = None) -> dict[str, Comparison]:
+                    online: OnlineSettings | None = None, lead_in: Dataset | None = None) -> dict[str, Comparison]:
     """Ref. and, given ``online`` settings, Proposed, predicted along ``steps`` in order
-    (`PathPredictor`) and compared on them."""
-    return compare_steps(PathPredictor(model, params, online).predict(steps), steps)
+    (`PathPredictor`) and compared on them; the path first goes through ``lead_in``, the
+    rows recorded before them (`PathPredictor.carry`)."""
+    predictor = PathPredictor(model, params, online)
+    if lead_in is not None:
+        predictor.carry(lead_in)
+    return compare_steps(predictor.predict(steps), steps)
 
 
 def measured_bend_deg(steps: Dataset) -> np.ndarray:

@@ -130,6 +130,7 @@ def replay(session: LoggedSession, model: ShootingModel, online: OnlineSettings 
                                  f"{current.t_s:.3f} s: ", unknown_effects=True)
             row_params = params if params is not None else with_parameters(base, current.values)
             predictor = PathPredictor(model, row_params, online)
+            predictor.carry(session.steps.select(np.arange(row)))  # as the live session restarted it
         try:
             # One settled step at a time, as the session hands them over.
             predicted.extend(predictor.predict(session.steps.select([row])))

@@ -26,6 +26,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import gc
+import itertools
 import json
 import time
 from collections import deque
@@ -755,7 +756,13 @@ class Session:
     async def _estimate(self, index: int, settled: Dataset, t_s: float) -> None:
         if self.estimation is None:
             online = self.request.settings.estimator.online_settings() if self.request.settings.estimator.online else None
-            self.estimation = PathPredictor(self.request.model, self.params, online)
+            predictor = PathPredictor(self.request.model, self.params, online)
+            # A restarted estimator (after the calibration) goes through the rows settled
+            # before this one first, as `replay` and `compare` do on the log.
+            before = list(itertools.takewhile(lambda row: row is not settled, self.settled_rows))
+            if before:
+                await asyncio.to_thread(predictor.carry, Dataset.concatenate(before))
+            self.estimation = predictor
         try:
             # In a worker thread: a slow solve must never delay the valve heartbeat.
             (estimate,) = await asyncio.to_thread(self.estimation.predict, settled)

@@ -31,7 +31,7 @@ from ..estimation import OnlineSettings
 from ..model_choice import ModelChoice, choose_model, model_choice
 from ..models.shooting import ShootingModel
 from . import render
-from .common import add_input_arguments, add_model_arguments, comparison_steps
+from .common import add_input_arguments, add_model_arguments, comparison_steps, lead_in
 from .figure_options import add_format_argument
 from .log_notice import (warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_uncalibrated,
                          warn_if_unsettled, warn_if_unsettled_steps)
@@ -95,9 +95,10 @@ def run(args: argparse.Namespace) -> int:
 
     def evaluate(choice: ModelChoice) -> Evaluation:
         params = choice.parameters(profile.model_parameters())
-        results = compare_methods(choice.model, params, validation, OnlineSettings() if args.online else None)
+        results = compare_methods(choice.model, params, validation, OnlineSettings() if args.online else None,
+                                  lead_in(steps))
         # diagnose's promise is checked the way it scored.
-        as_diagnosed = None if before_choice is None else scored_as_diagnosed(choice.model, params, validation)
+        as_diagnosed = None if before_choice is None else scored_as_diagnosed(choice.model, params, steps)
         return Evaluation(choice.parameter_path, choice.model, results,
                           {key: break_down(c, validation) for key, c in results.items()},
                           jet_force_scales(choice.model, params, validation), as_diagnosed,

@@ -330,19 +330,19 @@ def add_step_preview(args: argparse.Namespace, profile: RigProfile, steps: Datas
                              "-o", "after.toml"))
     lines.append(command("compare", *words, "--params", args.export or "after.toml", "--baseline", "before.toml",
                          "--online"))
-    _, _, validation = comparison_steps(args.input, args.profile, (profile, steps))
+    _, compared, _ = comparison_steps(args.input, args.profile, (profile, steps))
     data = Measurements(Path(args.input), profile, steps, None)
 
     def shown(effects: list[str]) -> float:
         fitted = api.calibrate(data, model=diagnosis.model, effects=effects, fit_on=ALL_ROWS)
-        return scored_as_diagnosed(fitted.model, fitted.fit.params, validation).orientation_rmse_deg
+        return scored_as_diagnosed(fitted.model, fitted.fit.params, compared).orientation_rmse_deg
 
     if args.export is None:
         after = shown(list(args.effect) + specs)
     else:
         exported = choose_model(None, (), args.export)
         after = scored_as_diagnosed(exported.model, exported.parameters(profile.model_parameters()),
-                                    validation).orientation_rmse_deg
+                                    compared).orientation_rmse_deg
     return AddStepPreview(tuple(lines), shown(list(args.effect)), after)
 
 

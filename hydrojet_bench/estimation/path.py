@@ -27,6 +27,7 @@ from itertools import groupby
 import numpy as np
 
 from ..data.dataset import Dataset
+from ..errors import ConvergenceError
 from ..geometry import matrix_from_quat, position_error_mm, quat_from_matrix, rotation_angle_deg
 from ..models.shooting import ShootingModel, Solution, tip_sensors_in_base_sensor
 from ..params import ModelParameters
@@ -200,17 +201,38 @@ class PathPredictor:
                                    positions)
             return [self._next_record(ref, online, estimate.error_before_deg, estimate.iterations, estimate.fallback)
                     for ref, online, estimate in zip(refs, onlines, estimates)]
-        # Ref. alone: each run of steps under one gravity is one batch of solves.
-        records: list[StepPrediction] = []
-        for _, run in groupby(range(len(steps)), key=lambda row: tuple(gravity[row])):
+        solutions = self._solve_ref_along(steps.jet_forces_n, gravity)
+        moments = np.tile(self.params.disturbance.moment_nm, (len(steps), 1))
+        return list(map(self._next_record, _predictions(REF, solutions, moments, measured, positions)))
+
+    def carry(self, steps: Dataset) -> None:
+        """Follow the path through ``steps`` (the rows recorded before the ones to predict,
+        in order), predicting none of them: the next step starts from the shape they end
+        in, Ref. and online estimation alike (the estimate itself is not changed; a
+        path the model cannot follow leaves none). A rod
+        with several equilibria under one load (a heavy tip on a soft horizontal rod)
+        sits on the one its history led it to; a path predicted from a fresh solve at its
+        first step can start on another and stay there."""
+        if not len(steps):
+            return
+        try:
+            solutions = self._solve_ref_along(steps.jet_forces_n, steps.gravity_in_base_m_s2())
+        except ConvergenceError:
+            self._previous_ref = None  # a path the model cannot follow: start afresh, as without one
+            return
+        if self._estimator is not None:
+            self._estimator.reset(previous=solutions[-1])
+
+    def _solve_ref_along(self, jet_forces_n: np.ndarray, gravity_in_base_m_s2: np.ndarray) -> list[Solution]:
+        """Ref.'s solutions of the rows in order, each from the last one's shape: each run of
+        rows under one gravity is one batch of solves."""
+        solutions: list[Solution] = []
+        for _, run in groupby(range(len(jet_forces_n)), key=lambda row: tuple(gravity_in_base_m_s2[row])):
             run = list(run)
-            solutions = self.model.solve_batch(steps.jet_forces_n[run], self._params_under(gravity[run[0]]),
-                                               [None] * len(run), self._previous_ref, along_path=True)
+            solutions.extend(self.model.solve_batch(jet_forces_n[run], self._params_under(gravity_in_base_m_s2[run[0]]),
+                                                    [None] * len(run), self._previous_ref, along_path=True))
             self._previous_ref = solutions[-1]
-            moments = np.tile(self.params.disturbance.moment_nm, (len(run), 1))
-            records.extend(map(self._next_record, _predictions(REF, solutions, moments, measured[run],
-                                                               None if positions is None else positions[run])))
-        return records
+        return solutions
 
 
 def _predictions(method: str, solutions: Sequence[Solution], moments_nm: np.ndarray, measured: np.ndarray,

@@ -356,6 +356,24 @@ def test_unconverged_fits_leave_the_verdict_undecided(baseline, ranking, undecid
     assert (said is None) if undecided is None else said.startswith(undecided), said
 
 
+def test_a_baseline_at_the_floor_whose_fit_did_not_converge_leaves_the_verdict_undecided(monkeypatch):
+    """Not "none": its parameters are no optimum (a soft horizontal rod folding over under
+    a 10 g capsule showed the floor held out with them, and 63 deg on another path)."""
+    from hydrojet_bench.analysis.diagnosis import engine
+
+    steps = steps_with({})
+    settings = DiagnosisSettings(workers=1)
+    assert diagnose(steps, "cosserat", candidates=candidates("jet_gain"), settings=settings).verdict == "none"
+
+    def unconverged(problem, *args, **kwargs):
+        return replace(fitting.fit(problem, *args, **kwargs), converged=False, stop_reason="step below 1e-10")
+
+    monkeypatch.setattr(engine, "fit", unconverged)
+    result = diagnose(steps, "cosserat", candidates=candidates("jet_gain"), settings=settings)
+    assert result.verdict == "undecided"
+    assert result.explanation.startswith("The baseline's fit is NOT converged: step below 1e-10 after")
+
+
 def test_the_fewest_parameter_fits_start_first():
     import dask.order
 

@@ -515,7 +515,10 @@ def _decide(problem: Problem, known: Sequence[Effect], noise: NoiseFloor, baseli
     qualifying = [c for c in ranking if c.qualifies]
     alternatives: tuple[str, ...] = ()
     remaining = False
-    if at_floor:
+    # An unconverged baseline at the floor is `_undecided`'s: its parameters are no optimum
+    # (a soft rod folding over under a heavy capsule showed the floor with them, and 63 deg
+    # on another path).
+    if at_floor and baseline.converged:
         verdict = NONE
         explanation = (f"The baseline's held-out error ({base_rmse:.3f} deg) is at the noise floor "
                        f"({floor:.3f} deg; at most {threshold:.3f} deg is noise at the "

@@ -216,11 +216,14 @@ def _predicted(predictor: PathPredictor, steps: Dataset,
 
 
 def scored_as_diagnosed(model: ShootingModel, params: ModelParameters, steps: Dataset) -> ErrorSummary:
-    """Ref.'s errors on ``steps`` as a diagnosis scores them: along the path, gravity
+    """Ref.'s errors on the validation steps (sweep >= 0; all steps without sweeps) as a
+    diagnosis scores them: along the whole path of ``steps`` in recorded order, gravity
     held at the steps' mean when the base is static (`session_gravity`). Per-step gravity
     would let a model follow the base sensor's noise, below the floor diagnose measures."""
     predictions, _ = predict_path(model, params, steps, session_gravity(steps))
-    return compare(predictions, steps).overall
+    sweeps = steps.sweep >= 0
+    rows = sweeps if sweeps.any() else np.ones(len(steps), dtype=bool)
+    return compare(predictions.select(rows), steps.select(rows)).overall
 
 
 def training_poses(problem: Problem) -> list[CalibrationPose]:
