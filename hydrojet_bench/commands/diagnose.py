@@ -27,7 +27,7 @@ from ..analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
 from ..analysis.diagnosis.fitting import scored_as_diagnosed
 from ..analysis.diagnosis.noise import repeatability_floor
 from ..analysis.diagnosis.separate import separating_plan, write_separating_plan
-from ..analysis.diagnosis.setup import SETUP, corrected_profile_text
+from ..analysis.diagnosis.setup import SETUP, corrected_profile_text, is_setup
 from ..plans import DEFAULT_SETTLE_S
 from ..inputs import load_dataset
 from ..data.dataset import Dataset
@@ -366,6 +366,12 @@ def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Name
         return
     if preview is None:
         calibrate = command("calibrate", *data, *known, "-o", "p.toml")
+        likely = next((name for name in diagnosis.training_only if not is_setup(name)), None)
+        if diagnosis.verdict == NONE and likely is not None:
+            print_next(console, f"no effect shows in the held-out steps, but the training steps favour {likely}: "
+                                "calibrate without and with it, and compare its value with its standard error", [
+                calibrate, command("calibrate", *data, *known, *effect_words([likely]), "-o", f"p_{likely}.toml")])
+            return
         if diagnosis.verdict == NONE:
             print_next(console, "the model is complete for these data; calibrate it with", [calibrate])
             return

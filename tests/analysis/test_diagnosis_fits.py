@@ -363,7 +363,9 @@ def test_a_baseline_at_the_floor_whose_fit_did_not_converge_leaves_the_verdict_u
 
     steps = steps_with({})
     settings = DiagnosisSettings(workers=1)
-    assert diagnose(steps, "cosserat", candidates=candidates("jet_gain"), settings=settings).verdict == "none"
+    nominal = diagnose(steps, "cosserat", candidates=candidates("jet_gain"), settings=settings)
+    assert (nominal.verdict, nominal.training_only) == ("none", ())
+    assert nominal.explanation.endswith("no effect is missing that these data can show.")
 
     def unconverged(problem, *args, **kwargs):
         return replace(fitting.fit(problem, *args, **kwargs), converged=False, stop_reason="step below 1e-10")
@@ -372,6 +374,23 @@ def test_a_baseline_at_the_floor_whose_fit_did_not_converge_leaves_the_verdict_u
     result = diagnose(steps, "cosserat", candidates=candidates("jet_gain"), settings=settings)
     assert result.verdict == "undecided"
     assert result.explanation.startswith("The baseline's fit is NOT converged: step below 1e-10 after")
+
+
+def test_an_effect_the_training_steps_show_below_the_floor_is_said(tmp_path):
+    """A clamp compliance of 4 rad/N m on a rig tilted 45 degrees: the held-out error is at
+    the floor, but the training steps score the compliance decisively better. "none"
+    then says so, and names it, instead of "no effect is missing"."""
+    profile_path = tmp_path / "tilted.toml"
+    profile_path.write_text('extends = "sim"\n[base]\norientation_in_tracker = [0.3826834323650898, '
+                            '0.9238795325112867, 0.0, 0.0]\n')
+    steps = steps_with({"base_compliance.compliance_rad_per_nm": 4.0}, load_profile(profile_path), seed=0)
+    diagnosis = diagnose(steps, "cosserat", candidates=candidates("base_compliance", "jet_gain"),
+                         settings=DiagnosisSettings(workers=1))
+    assert diagnosis.verdict == "none"
+    # Others absorb a part of it (a jet gain, a tilted tracker), by far less.
+    assert diagnosis.training_only[0] == "base_compliance"
+    assert "the training steps do: base_compliance -9" in diagnosis.explanation
+    assert diagnosis.as_dict()["training_only"] == list(diagnosis.training_only)
 
 
 def test_the_fewest_parameter_fits_start_first():
