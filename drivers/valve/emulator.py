@@ -58,9 +58,9 @@ class ValveEmulator(EmulatorHandler):
         clock: Callable[[], float] = time.monotonic,
         watchdog_s: float = DEFAULT_WATCHDOG_MS / 1000,
     ) -> None:
-        watchdog_ms = round(watchdog_s * 1000)
-        if not 1 <= watchdog_ms <= 0xFFFF:
+        if not 0.001 <= watchdog_s <= 65.535:  # whole milliseconds, 1..65535 (and no NaN, no inf)
             raise ValueError(f"watchdog_s must be 0.001..65.535 s, got {watchdog_s}")
+        watchdog_ms = round(watchdog_s * 1000)
         self.plant = plant
         self.clock = clock
         self.watchdog_ms = watchdog_ms

@@ -100,6 +100,14 @@ def compare_methods(model: ShootingModel, params: ModelParameters, steps: Datase
     return compare_steps(predictor.predict(steps), steps)
 
 
+def lead_in(steps: Dataset) -> Dataset:
+    """The rows recorded before the first validation step (sweep >= 0; none when there are
+    no sweeps): the path a prediction of the sweeps goes through first, as the rod did
+    (`PathPredictor.carry`)."""
+    sweeps = np.flatnonzero(steps.sweep >= 0)
+    return steps.select(np.arange(sweeps[0] if len(sweeps) else 0))
+
+
 def measured_bend_deg(steps: Dataset) -> np.ndarray:
     """Bending angle of each row from the measured tip orientation: the angle between the
     clamp axis and the tip tangent (z axes), degrees."""

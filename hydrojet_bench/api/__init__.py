@@ -25,7 +25,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from ..analysis.compare import compare_methods, compare_steps
+from ..analysis.compare import compare_methods, compare_steps, lead_in
 from ..analysis.diagnosis import DiagnosisSettings, diagnose as run_diagnosis
 from ..analysis.diagnosis.noise import repeatability_floor
 from ..bench.replay import live_difference_deg, logged_steps, read_session, replay as replay_session
@@ -34,6 +34,7 @@ from ..errors import ConvergenceError, UserError
 from ..estimation import OnlineSettings
 from ..estimation.calibration import (DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_dataset,
                                       fit_mask, rows_that_identify)
+from ..files import check_writable_target
 from ..inputs import load_dataset, load_steps
 from ..logs.condition import log_condition
 from ..model_choice import COSSERAT, ModelChoice, ModelDefaults, choose_model
@@ -110,7 +111,8 @@ def compare(data: Data, params: Params, *, baseline: Params = None, online: bool
     settings = OnlineSettings() if online else None
 
     def evaluate(choice: ModelChoice):
-        return compare_methods(choice.model, choice.parameters(steps.profile.model_parameters()), validation, settings)
+        return compare_methods(choice.model, choice.parameters(steps.profile.model_parameters()), validation, settings,
+                               lead_in(steps))
 
     after_choice = _choice(model, effects, params)
     before = None if baseline is None else evaluate(_choice(model, (), baseline, effect_files=effects))
@@ -193,9 +195,12 @@ def study(spec: str | Path | None = None, output: str | Path | None = None, *, w
         if output is None or not (Path(output) / "rows").is_dir():
             raise UserError(f"{output}: no study results here (no rows/ folder)")
         store = RowStore(Path(output), ROW_COLUMNS, "cell_id")
-        rows = store.table()
+        # The cells of the spec last run here; rows of cells it no longer had stay out.
+        members = store.members()
+        rows = store.table(members)
         return StudyResult(Path(output).name, store.folder, rows, None,
-                           tuple(write_report(rows, store.folder / "report")))
+                           tuple(write_report(rows, store.folder / "report")),
+                           left_out=0 if members is None else len(store.stored() - members))
     if spec is None:
         raise UserError("study: give a SPEC.toml (or report_only with the result folder)")
     if workers < 1:
@@ -205,15 +210,18 @@ def study(spec: str | Path | None = None, output: str | Path | None = None, *, w
     if not cells:
         raise UserError(f"{spec}: the spec has no cells (none = false and no effects or pairs)")
     store = RowStore(Path(output) if output is not None else Path(f"study-{plan.name}"), ROW_COLUMNS, "cell_id")
+    if csv:  # refused before the cells run, not after
+        check_writable_target(store.folder / "rows.csv", "row table", overwrite=True)
     if progress is not None:
         where = scheduler or f"a local cluster of {workers} worker{'s' if workers != 1 else ''}"
         progress(f"study {plan.name}: {len(cells)} cells on {where}, rows in {store.rows_folder}")
     ids = {cell.id for cell in cells}
+    store.remember(ids)
     outcome = run_tasks(lambda: dask_client(scheduler, workers), run_cell, cells, [cell.id for cell in cells],
                         store, error_row=cell_row, label="cells")
     # Rows of cells this spec no longer has (it was edited, or an effect file moved) stay
     # stored but are no part of this study's tables and report.
-    left_out = len(store.finished() - ids)
+    left_out = len(store.stored() - ids)
     written_csv = store.write_csv(ids) if csv else None
     rows = store.table(ids)
     return StudyResult(plan.name, store.folder, rows, outcome, tuple(write_report(rows, store.folder / "report")),

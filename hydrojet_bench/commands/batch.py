@@ -66,28 +66,35 @@ def run(args: argparse.Namespace) -> int:
             if not start or not MAGIC.startswith(start):
                 raise UserError(f"{path}: not an MCAP session log; replay re-runs a session's live estimation, which "
                                 "only its log holds (batch diagnose takes CSV tables)")
-    tasks = [LogTask(str(path.resolve()), getattr(args, "profile", None), getattr(args, "model", "cosserat"))
-             for path in args.logs]
+    warnings = render.console(stderr=True)
+    tasks: list[LogTask] = []
+    for path in args.logs:
+        task = LogTask.of(path, getattr(args, "profile", None), getattr(args, "model", "cosserat"))
+        if any(task.path == earlier.path for earlier in tasks):
+            warnings.print(f"warning: {path} is given more than once: analysed once", markup=False, highlight=False)
+        else:
+            tasks.append(task)
     with tempfile.TemporaryDirectory(prefix="hydrojet-batch-") as scratch:
         store = RowStore(args.output or Path(scratch), columns, "log_id")
-        run_tasks(lambda: dask_client(args.scheduler, args.workers), function, tasks, [task.id for task in tasks],
-                  store, error_row=lambda task, text: log_row(task, columns, text), label="logs")
-        table = store.table()
+        outcome = run_tasks(lambda: dask_client(args.scheduler, args.workers), function, tasks,
+                            [task.id for task in tasks], store,
+                            error_row=lambda task, text: log_row(task, columns, text), label="logs")
+        table = store.table({task.id for task in tasks})
     order = {task.path: index for index, task in enumerate(tasks)}
-    rows = sorted((render.json_row(row) for row in table.to_dict("records") if row["log"] in order),
-                  key=lambda row: order[row["log"]])
+    rows = sorted((render.json_row(row) for row in table.to_dict("records")), key=lambda row: order[row["log"]])
     console = render.console_for(args)
     view = render.table(f"batch {args.action}: {len(rows)} logs", labels=("log",), numbers=shown)
     view.add_column("error")
     for row in rows:
         view.add_row(Path(row["log"]).name, *(_cell(row[name]) for name in shown), row["error"] or "")
     console.print(view)
-    warnings = render.console(stderr=True)
     for row in rows:
-        if row["log_damage"]:
-            warnings.print(f"warning: {row['log_damage']}", markup=False, highlight=False)
+        for notice in (row["log_damage"], row.get("profile_mismatch")):
+            if notice:
+                warnings.print(f"warning: {notice}", markup=False, highlight=False)
     if args.output:
-        console.print(f"rows stored under {store.rows_folder}")
+        console.print(f"{outcome.submitted} logs analysed ({outcome.skipped} already done: their rows are reused "
+                      f"unless the file changed since); rows stored under {store.rows_folder}")
     if args.json:
         render.write_json(args.json, rows)
     return 1 if any(row["error"] for row in rows) else 0

@@ -6,8 +6,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import UserError
 from .. import inputs
 from ..data.dataset import Dataset
@@ -71,11 +69,3 @@ def comparison_steps(path: Path, profile: str | None,
     if len(validation) == 0:
         raise UserError(f"{path}: no steps to compare")
     return profile_used, steps, validation
-
-
-def lead_in(steps: Dataset) -> Dataset:
-    """The rows recorded before the first validation step (sweep >= 0; none when there are
-    no sweeps): the path a prediction of the sweeps goes through first, as the rod did
-    (`PathPredictor.carry`)."""
-    sweeps = np.flatnonzero(steps.sweep >= 0)
-    return steps.select(np.arange(sweeps[0] if len(sweeps) else 0))

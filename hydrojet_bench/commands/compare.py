@@ -21,7 +21,7 @@ from rich.console import Console
 from ..analysis.breakdowns import (MISSING_LABEL, STRAIGHT, STRAIGHT_BELOW_DEG, Breakdowns, JetScale, break_down,
                                    direction_order, disturbance_by_sweep, jet_force_scales, noise_only_gap,
                                    per_step)
-from ..analysis.compare import Comparison, compare_methods
+from ..analysis.compare import Comparison, compare_methods, lead_in
 from ..analysis.diagnosis import NoiseFloor, estimate_noise_floor
 from ..analysis.diagnosis.fitting import scored_as_diagnosed
 from ..analysis.metrics import ErrorSummary
@@ -31,7 +31,7 @@ from ..estimation import OnlineSettings
 from ..model_choice import ModelChoice, choose_model, model_choice
 from ..models.shooting import ShootingModel
 from . import render
-from .common import add_input_arguments, add_model_arguments, comparison_steps, lead_in
+from .common import add_input_arguments, add_model_arguments, comparison_steps
 from .figure_options import add_format_argument
 from .log_notice import (warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_uncalibrated,
                          warn_if_unsettled, warn_if_unsettled_steps)

@@ -19,8 +19,8 @@ from . import render
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("emulate", help="serve a device emulator on a pty until Ctrl-C")
     parser.add_argument("device", choices=("aurora", "valves"), help="which device to emulate")
-    parser.add_argument("--watchdog-ms", type=float, default=500.0,
-                        help="valves: firmware watchdog period in ms (default 500)")
+    parser.add_argument("--watchdog-ms", type=float,
+                        help="valves: firmware watchdog period in ms, 1..65535 (default 500)")
     parser.add_argument("--profile", default="sim",
                         help="sim profile whose digital twin drives the emulator (default: sim)")
     parser.add_argument("--static", action="store_true",
@@ -30,13 +30,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     console = render.console(stderr=True)
+    if args.device != "valves" and args.watchdog_ms is not None:
+        raise UserError(f"--watchdog-ms is the valve controller's; the {args.device} emulator has none")
     plant = _plant(args)
     if args.device == "valves":
-        if not args.watchdog_ms > 0:
-            raise UserError(f"--watchdog-ms must be positive, got {args.watchdog_ms}")
+        watchdog_ms = 500.0 if args.watchdog_ms is None else args.watchdog_ms
+        # The firmware holds the period in whole milliseconds, 16 bits.
+        if not 1 <= watchdog_ms <= 0xFFFF:
+            raise UserError(f"--watchdog-ms must be 1..65535 (the firmware's whole milliseconds), got {watchdog_ms:g}")
         from drivers.valve.serve import serve
 
-        serve(_ReportingPlant(plant), args.watchdog_ms / 1000.0,
+        serve(_ReportingPlant(plant), round(watchdog_ms) / 1000.0,
               announce=lambda path: print(f"valve controller emulator on {path}", flush=True))
     else:
         from drivers.aurora.serve import serve_pty

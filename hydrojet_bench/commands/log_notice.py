@@ -1,7 +1,8 @@
 """The notices the analysis commands give about their input, each one warning line on
 standard error and a field of their JSON documents: a session log that is cut or
 damaged (``log_damage``), a CSV table read with the default profile although
-another one wrote it (``profile_mismatch``), and steps of a single sample, which are no
+another one wrote it, or a log read with a profile of another rig than it embeds
+(``profile_mismatch``), and steps of a single sample, which are no
 settled equilibria (``single_sample_steps``), nor are steps whose tip still turned
 (``unsettled_steps``); and of a parameter file, what of the model it did
 not calibrate (`ModelChoice.uncalibrated`) and whether it was fitted on the steps
@@ -15,9 +16,9 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 
-from ..data.csv_io import recorded_profile, recorded_with
 from ..data.dataset import STEP_WINDOW_S, UNSETTLED_TREND_DEG, Dataset, SampleFlag
 from ..estimation.calibration import ALL_ROWS, CALIBRATION_POSES, SWEEPS
+from ..inputs import recorded_elsewhere
 from ..logs.condition import incomplete_log
 from ..model_choice import ModelChoice
 from ..profile import RigProfile
@@ -59,18 +60,11 @@ def warn_if_streams_fell_short(path: Path) -> list[str] | None:
 
 
 def warn_if_recorded_elsewhere(path: Path, profile_given: str | None, profile: RigProfile) -> dict[str, str] | None:
-    """For a CSV table read with the default ``profile`` (no ``--profile`` given) whose
-    comments say another profile wrote it (`write_csv` notes it): gravity, mountings and
-    rod may all be another rig's. Print so and return it for the JSON document; None
-    otherwise."""
-    if profile_given is not None or Path(path).suffix.lower() == ".mcap":
-        return None
-    recorded = recorded_profile(path)
-    if recorded is None or recorded_with(recorded, profile):
-        return None
-    _warn(f"{path} was recorded with rig profile {recorded} (its comments say so) and is read with "
-          f"{profile.name!r}, the default for a CSV table: give --profile")
-    return {"recorded": recorded, "used": profile.name}
+    """Print `recorded_elsewhere`'s notice, if any, and return it for the JSON document."""
+    notice = recorded_elsewhere(path, profile_given, profile)
+    if notice is not None:
+        _warn(notice["message"])
+    return notice
 
 
 def warn_if_unsettled(path: Path, steps: Dataset, log_damage: dict[str, object] | None) -> dict[str, int] | None:

@@ -15,10 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from ..estimation.setup_warnings import calibration_warnings
+from ..model_choice import choose_model
+from ..profile import load_profile
 from . import render
-from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
-from .log_notice import warn_if_incomplete
+from .figure_options import add_format_argument
+from .log_notice import warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -41,6 +43,11 @@ def run(args: argparse.Namespace) -> int:
     result = replay(args.input, model=args.model, effects=args.effect, params=args.params, online=args.online,
                     profile=args.profile)
     warn_if_incomplete(args.input)
+    profile_mismatch = (None if args.profile is None
+                        else warn_if_recorded_elsewhere(args.input, args.profile, load_profile(args.profile)))
+    # Parameters calibrated on this log's sweeps replay training errors, not held-out ones.
+    fitted_on = None if args.params is None else warn_if_fitted_on(choose_model(None, (), args.params), args.input,
+                                                                     result.steps)
     console = render.console_for(args)
     warnings = render.progress_console()
     model = result.model
@@ -68,5 +75,6 @@ def run(args: argparse.Namespace) -> int:
     if result.skipped:
         warnings.print(f"[yellow]warning:[/] {result.skipped} step(s) did not converge and were left out")
     if args.json:
-        render.write_json(args.json, result.as_dict())
+        render.write_json(args.json, {**result.as_dict(), "profile_mismatch": profile_mismatch,
+                                      "held_out": fitted_on is None})
     return 0 if np.isfinite(result.results["ref"].overall.orientation_rmse_deg) else 1

@@ -27,6 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--csv", action="store_true", help="also write DIR/rows.csv")
     parser.add_argument("--report-only", type=Path, metavar="DIR", help="rebuild DIR/report/ from stored rows")
     render.add_json_argument(parser, "the outcome, the files written and every row")
+    render.add_exit_codes(parser, {1: "some cell failed (its row names the error; the others are reported)"})
     parser.set_defaults(func=run)
 
 
@@ -58,5 +59,9 @@ def run(args: argparse.Namespace) -> int:
             "rows_left_out": result.left_out,
             "files": [str(path) for path in ([result.csv] if result.csv else []) + list(result.report)],
             "rows": [render.json_row(row) for row in result.rows.to_dict("records")]})
-    return 0
+    failed = int(result.rows["error"].notna().sum())
+    if failed:
+        progress.print(f"[yellow]warning:[/] {failed} of {len(result.rows)} cells failed (their rows name the "
+                       "error); a rerun into the same folder tries them again")
+    return 1 if failed else 0
 

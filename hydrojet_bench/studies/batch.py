@@ -16,7 +16,8 @@ from ..errors import UserError
 DIAGNOSE_COLUMNS: dict[str, str] = {
     "log_id": "string", "log": "string", "model": "string", "steps": "int64", "verdict": "string",
     "alternatives": "string", "baseline_heldout_rmse_deg": "float64", "winner_heldout_rmse_deg": "float64",
-    "noise_floor_deg": "float64", "log_damage": "string", "seconds": "float64", "error": "string",
+    "noise_floor_deg": "float64", "log_damage": "string", "profile_mismatch": "string", "seconds": "float64",
+    "error": "string",
 }
 REPLAY_COLUMNS: dict[str, str] = {
     "log_id": "string", "log": "string", "model": "string", "steps": "int64",
@@ -33,10 +34,18 @@ class LogTask:
     path: str
     profile: str | None = None
     model: str = "cosserat"
+    # The file's size and modification time: a log rewritten since is analysed again.
+    version: str = ""
 
     @property
     def id(self) -> str:
-        return hashlib.sha256(f"{self.path}|{self.profile}|{self.model}".encode()).hexdigest()[:16]
+        return hashlib.sha256(f"{self.path}|{self.profile}|{self.model}|{self.version}".encode()).hexdigest()[:16]
+
+    @classmethod
+    def of(cls, path: Path, profile: str | None = None, model: str = "cosserat") -> LogTask:
+        """The task of the file at ``path`` as it is now."""
+        stat = path.stat()
+        return cls(str(path.resolve()), profile, model, f"{stat.st_size}-{stat.st_mtime_ns}")
 
 
 def log_row(task: LogTask, columns: dict[str, str], error: str | None = None) -> dict:
@@ -48,13 +57,15 @@ def log_row(task: LogTask, columns: dict[str, str], error: str | None = None) ->
 
 def diagnose_log(task: LogTask) -> dict:
     """One row: the log's diagnosis; never raises."""
-    from ..inputs import load_steps
+    from ..inputs import load_steps, recorded_elsewhere
 
     started = time.perf_counter()
     row = log_row(task, DIAGNOSE_COLUMNS)
     try:
         profile = task.profile if task.profile is not None or Path(task.path).suffix.lower() == ".mcap" else "sim"
         steps = load_steps(task.path, profile)
+        mismatch = recorded_elsewhere(Path(task.path), task.profile, steps.profile)
+        row["profile_mismatch"] = None if mismatch is None else mismatch["message"]
         diagnosis = diagnose(steps, task.model, settings=DiagnosisSettings(workers=1))
         winner = diagnosis.winner
         row.update(steps=len(steps), verdict=diagnosis.verdict, alternatives=",".join(diagnosis.alternatives),

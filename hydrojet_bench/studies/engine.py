@@ -53,6 +53,9 @@ def dask_client(scheduler: str | None = None, workers: int = 2) -> Iterator[Any]
             client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
         except (OSError, TimeoutError) as error:
             raise UserError(f"--scheduler {scheduler}: cannot connect ({error})") from None
+        except ValueError as error:  # distributed's words for an address it cannot parse
+            raise UserError(f"--scheduler {scheduler!r} is no scheduler address ({error}); give "
+                            "tcp://host:port") from None
         with client:
             yield client
         return
@@ -66,8 +69,9 @@ def dask_client(scheduler: str | None = None, workers: int = 2) -> Iterator[Any]
 def run_tasks(connect: Callable[[], contextlib.AbstractContextManager[Any]], function: Callable[[Any], dict],
               items: Sequence[Any], ids: Sequence[str], store: RowStore, *, error_row: Callable[[Any, str], dict],
               label: str = "cells", console: Console | None = None) -> Outcome:
-    """Run ``function(item)`` for every item whose id is not stored yet, storing each row
-    as it arrives. ``connect()`` gives the client (see `dask_client`), only called when
+    """Run ``function(item)`` for every item whose id has no stored row yet, or only a
+    failed one (a failure may be the worker's, not the item's), storing each row as it
+    arrives. ``connect()`` gives the client (see `dask_client`), only called when
     there is work left. ``error_row(item, text)`` makes the row of a task that raised (or
     whose worker died)."""
     from distributed import as_completed

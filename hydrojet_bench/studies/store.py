@@ -5,6 +5,7 @@ a half-written row and a rerun knows exactly which ids are done.
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Collection, Mapping
 from pathlib import Path
@@ -14,6 +15,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from ..errors import UserError
+
+# The ids of the cells of the spec last run into the folder.
+MEMBERS_FILE = "members.json"
 
 
 class RowStore:
@@ -30,9 +34,29 @@ class RowStore:
         except OSError as error:
             raise UserError(f"{self.folder}: cannot create the result folder: {error.strerror or error}") from None
 
-    def finished(self) -> set[str]:
-        """Ids of the rows already stored."""
+    def remember(self, ids: Collection[str]) -> None:
+        """Keep ``ids`` as the folder's members: what a later `members` (a report rebuilt
+        without the spec) takes as its rows."""
+        (self.folder / MEMBERS_FILE).write_text(json.dumps(sorted(ids)))
+
+    def members(self) -> set[str] | None:
+        """The ids the last `remember` kept (None when it never ran here)."""
+        path = self.folder / MEMBERS_FILE
+        try:
+            return set(json.loads(path.read_text()))
+        except FileNotFoundError:
+            return None
+        except (OSError, ValueError, TypeError) as error:
+            raise UserError(f"{path}: unreadable ({error}); remove it to report every stored row") from None
+
+    def stored(self) -> set[str]:
+        """Ids of the rows stored, failed ones included."""
         return {path.stem for path in self.rows_folder.glob("*.parquet")}
+
+    def finished(self) -> set[str]:
+        """Ids of the rows stored without an error (a rerun tries the failed ones again)."""
+        table = self.table()
+        return set(table.loc[table["error"].isna(), self.id_column]) if "error" in table else set(table[self.id_column])
 
     def append(self, row: Mapping[str, object]) -> Path:
         """Store one row at once (atomically: a temporary file renamed into place)."""
@@ -48,7 +72,17 @@ class RowStore:
         parts = sorted(path for path in self.rows_folder.glob("*.parquet") if ids is None or path.stem in ids)
         if not parts:
             return self.schema.empty_table().to_pandas()
-        return pa.concat_tables(pq.read_table(part, schema=self.schema) for part in parts).to_pandas()
+        return pa.concat_tables(self._read(part) for part in parts).to_pandas()
+
+    def _read(self, part: Path) -> pa.Table:
+        try:
+            table = pq.read_table(part)
+            if table.schema.names == self.schema.names:
+                return table.cast(self.schema)
+        except (pa.ArrowException, OSError) as error:
+            raise UserError(f"{part}: not a readable row ({error}); remove it, or give another folder") from None
+        raise UserError(f"{part}: a row of another kind (columns {', '.join(table.schema.names[:3])}, ...): this "
+                        "folder holds another command's results; give another folder")
 
     def write_csv(self, ids: Collection[str] | None = None) -> Path:
         """The table (of ``ids`` when given) as ``DIR/rows.csv`` beside the Parquet parts."""

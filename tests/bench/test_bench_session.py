@@ -153,6 +153,17 @@ def test_replay_says_what_its_parameters_did_not_calibrate_and_whether_its_own_f
     calibration = json.loads(figures.read_text())["calibration"]
     assert calibration["convergence"].startswith("converged" if calibration["converged"] else "NOT converged")
     assert ("NOT converged" in capsys.readouterr().err) == (not calibration["converged"])
+    # Parameters calibrated on the log's sweeps too replay training errors; a profile of
+    # another rig than the log embeds models that rig: both are said.
+    assert main(["calibrate", log, "--fit-on", "all", "-o", str(tmp_path / "all.toml")]) in (0, 3)
+    capsys.readouterr()
+    assert main(["replay", log, "--params", str(tmp_path / "all.toml"), "--profile", "hydrojet-v1",
+                 "--json", str(figures)]) == 0
+    warnings = " ".join(capsys.readouterr().err.split())
+    assert "so these are training errors, not held-out ones" in warnings
+    assert f"{log} embeds rig profile 'sim' and is read with 'hydrojet-v1' (--profile), whose gravity" in warnings
+    document = json.loads(figures.read_text())
+    assert document["held_out"] is False and document["profile_mismatch"]["recorded"] == "sim"
 
 
 def test_cancelling_a_session_closes_the_valves_and_finishes_the_log(tmp_path):

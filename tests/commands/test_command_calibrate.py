@@ -83,7 +83,8 @@ def test_a_table_recorded_with_another_profile_is_read_with_the_default_and_a_wa
                    "with 'sim', the default for a CSV table: give --profile")
         assert (warning in err) == warned, err
         mismatch = json.loads(document.read_text())["profile_mismatch"]
-        assert mismatch == ({"recorded": recorded, "used": "sim"} if warned else None)
+        assert mismatch == ({"recorded": recorded, "used": "sim", "message": warning.removeprefix("warning: ")}
+                            if warned else None)
     assert main(["calibrate", str(elsewhere), "--profile", "sim", "-o", str(tmp_path / "chosen.toml")]) == 0
     assert "recorded with rig profile" not in capsys.readouterr().err
 

@@ -9,6 +9,7 @@ import sys
 import time
 
 import numpy as np
+import pytest
 import serial
 
 from drivers.aurora.client import AuroraTracker
@@ -103,3 +104,17 @@ def test_emulate_rejects_an_unknown_profile_without_traceback():
                              "no-such-profile"], capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
     assert "no-such-profile" in result.stderr and "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["valves", "--watchdog-ms", "inf"], "--watchdog-ms must be 1..65535 (the firmware's whole milliseconds), got inf"),
+    (["valves", "--watchdog-ms", "0.4"], "got 0.4"),
+    (["valves", "--watchdog-ms", "70000"], "got 70000"),
+    (["valves", "--watchdog-ms", "nan"], "got nan"),
+    (["aurora", "--watchdog-ms", "-5"], "--watchdog-ms is the valve controller's; the aurora emulator has none"),
+])
+def test_a_watchdog_the_firmware_cannot_hold_is_one_line(args, message, capsys):
+    from hydrojet_bench.cli import main
+
+    assert main(["emulate", *args]) == 2
+    assert message in capsys.readouterr().err

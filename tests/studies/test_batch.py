@@ -39,6 +39,9 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
 
 def test_batch_diagnose_gives_one_row_per_log(logs: list[Path], tmp_path: Path):
     out = tmp_path / "rows"
+    broken = tmp_path / "broken.csv"
+    broken.write_bytes(logs[2].read_bytes())
+    logs = [*logs[:2], broken]
     result = batch("diagnose", *map(str, logs), "--json", "-", "-o", str(out))
     assert result.returncode == 1, result.stderr  # one log failed
     rows = json.loads(result.stdout)
@@ -49,6 +52,21 @@ def test_batch_diagnose_gives_one_row_per_log(logs: list[Path], tmp_path: Path):
     assert rows[1]["baseline_heldout_rmse_deg"] > 5 * rows[1]["noise_floor_deg"]
     assert len(list((out / "rows").glob("*.parquet"))) == 3
     assert "weak_jet.csv" in result.stderr  # the table goes to stderr when JSON takes stdout
+
+    # Rerun into the same folder: a log given twice is analysed once, one unchanged is
+    # reused, and one rewritten since (the broken one, now another rig's table read with
+    # the default profile) is analysed again and its mismatch said.
+    broken.write_text(logs[1].read_text().replace("# rig profile: sim (", "# rig profile: horiz (", 1))
+    again = batch("diagnose", str(logs[0]), str(logs[0].parent / ".." / logs[0].parent.name / "plain.csv"),
+                  str(broken), "--json", "-", "-o", str(out))
+    assert again.returncode == 0, again.stderr
+    err = " ".join(again.stderr.split())
+    assert "plain.csv is given more than once: analysed once" in err
+    assert "1 logs analysed (1 already done" in err
+    assert f"warning: {broken} was recorded with rig profile horiz" in err
+    plain, rewritten = json.loads(again.stdout)
+    assert plain == rows[0] and rewritten["verdict"] == "jet_gain" and rewritten["error"] is None
+    assert rewritten["profile_mismatch"].startswith(f"{broken} was recorded with rig profile horiz")
 
 
 TINY_PLAN = "settle_s = 2.0\n" + "".join(

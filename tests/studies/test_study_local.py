@@ -12,7 +12,8 @@ from study_helpers import TINY, run_study, stored_rows, write_spec
 def test_local_cluster_records_every_cell_and_the_failing_one(spec_with_boom: Path, tmp_path: Path):
     out = tmp_path / "out"
     result = run_study(str(spec_with_boom), "-o", str(out), "--workers", "2", "--csv")
-    assert result.returncode == 0, result.stderr
+    assert result.returncode == 1, result.stderr  # a cell failed: no whole answer
+    assert "warning: 2 of 6 cells failed" in " ".join(result.stderr.split())
     rows = stored_rows(out)
     assert len(rows) == 6 and rows["cell_id"].is_unique
     failed = rows[rows["error"].notna()]
@@ -35,7 +36,7 @@ def test_local_cluster_records_every_cell_and_the_failing_one(spec_with_boom: Pa
 
     (report / "summary.md").unlink()
     rebuilt = run_study("--report-only", str(out), "--json", "-")
-    assert rebuilt.returncode == 0, rebuilt.stderr
+    assert rebuilt.returncode == 1, rebuilt.stderr
     assert (report / "summary.md").read_text() == summary
     document = json.loads(rebuilt.stdout)  # the JSON alone on standard output
     assert document["outcome"] is None and len(document["rows"]) == 6
@@ -51,3 +52,12 @@ def test_local_cluster_records_every_cell_and_the_failing_one(spec_with_boom: Pa
     assert {row["truth"] for row in document["rows"]} == {"none", "jet_gain"} and len(document["rows"]) == 4
     assert "warning: 2 row(s) under" in " ".join(rerun.stderr.split())
     assert "boom" not in (report / "summary.md").read_text()
+    # Rebuilt without the spec, the report still leaves them out.
+    rebuilt = run_study("--report-only", str(out), "--json", "-")
+    assert rebuilt.returncode == 0, rebuilt.stderr
+    assert len(json.loads(rebuilt.stdout)["rows"]) == 4 and "boom" not in (report / "summary.md").read_text()
+    assert "warning: 2 row(s) under" in " ".join(rebuilt.stderr.split())
+    # The failed cells are tried again when their spec runs again.
+    again = run_study(str(spec_with_boom), "-o", str(out))
+    assert again.returncode == 1
+    assert "2 cells run (4 already done), 2 failed" in " ".join(again.stdout.split())

@@ -137,3 +137,27 @@ def test_the_cell_limit_counts_the_cells_the_study_expands_to(name: str, monkeyp
     monkeypatch.setattr(spec_module, "MAX_CELLS", cells - 1)
     with pytest.raises(UserError, match=f"{cells} cells"):
         load_study(path)
+
+
+def test_a_bad_scheduler_a_row_table_onto_a_folder_and_foreign_rows_are_one_line(tmp_path: Path, capsys):
+    from hydrojet_bench.cli import main
+    from hydrojet_bench.studies.batch import DIAGNOSE_COLUMNS, LogTask, log_row
+    from hydrojet_bench.studies.store import RowStore
+
+    spec, out = write_spec(tmp_path, TINY), tmp_path / "out"
+    assert main(["study", str(spec), "-o", str(out), "--scheduler", "garbage"]) == 2
+    assert "--scheduler 'garbage' is no scheduler address" in capsys.readouterr().err
+    (out / "rows.csv").mkdir(parents=True)
+    assert main(["study", str(spec), "-o", str(out), "--csv"]) == 2
+    assert f"{out / 'rows.csv'}: is a directory" in capsys.readouterr().err
+    # A batch's rows in a folder given as a study's: named, not a traceback.
+    (out / "members.json").unlink()  # which the study's first attempt kept
+    RowStore(out, DIAGNOSE_COLUMNS, "log_id").append(log_row(LogTask("/x.csv"), DIAGNOSE_COLUMNS, "failed"))
+    assert main(["study", "--report-only", str(out)]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "a row of another kind" in err and str(out / "rows") in err
+    for part in (out / "rows").glob("*.parquet"):
+        part.unlink()
+    (out / "rows" / "junk.parquet").write_text("not parquet")
+    assert main(["study", "--report-only", str(out)]) == 2
+    assert "not a readable row" in capsys.readouterr().err
