@@ -37,11 +37,15 @@ def run(args: argparse.Namespace) -> int:
     else:
         span = (f"{report.messages} messages, t = {report.first_t_s:.3f} s to {report.last_t_s:.3f} s "
                 f"({report.last_t_s - report.first_t_s:.3f} s)")
-    state = "was truncated (unfinished); kept everything before the cut" if report.truncated else "was complete"
+    state = ("was truncated (unfinished); kept everything before the cut" if report.truncated
+             else "ended properly" if report.damage is not None else "was complete")
     console = render.console()
     console.print(f"{args.input} {state}", highlight=False, soft_wrap=True, markup=False)
     if report.damage is not None:
         render.console(stderr=True).print(f"warning: {args.input} is damaged: {report.damage.describe()}; kept every "
                                           "intact chunk", highlight=False, soft_wrap=True, markup=False)
     console.print(f"wrote {output}: {span}", highlight=False, soft_wrap=True, markup=False)
+    if report.truncated or report.damage is not None:
+        console.print(f"(the copy records what {args.input} lost: every analysis of it says so)", highlight=False,
+                      soft_wrap=True, markup=False)
     return 0

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..plans import CALIBRATION_SWEEP
+from .format import RECOVERY_METADATA_NAME
 from .reader import LogDamage, read_log
 from .topics import Sample, Step
 
@@ -25,12 +26,17 @@ class LogCondition:
     steps_planned: int | None
     steps_logged: int
     calibration_poses_logged: int
+    # For a copy `recover_log` wrote: what its source lost (one line), None otherwise or
+    # when the source was whole.
+    recovered_loss: str | None = None
 
     @property
     def whole(self) -> bool:
-        """Nothing to say: it ends properly, nothing inside is damaged, and it holds every
-        step of its plan (a log recovered from a cut file ends properly but does not)."""
-        return not self.truncated and self.damage is None and not self.steps_missing
+        """Nothing to say: it ends properly, nothing inside is damaged, it holds every step
+        of its plan (a log recovered from a cut file ends properly but does not), and it is
+        no copy of a log that lost something."""
+        return (not self.truncated and self.damage is None and not self.steps_missing
+                and self.recovered_loss is None)
 
     @property
     def steps_missing(self) -> int | None:
@@ -41,6 +47,8 @@ class LogCondition:
         problems = (["it is truncated (the session did not finish, or the file was cut)"] if self.truncated else [])
         if self.damage is not None:
             problems.append(f"it is damaged: {self.damage.describe()}")
+        if self.recovered_loss is not None:
+            problems.append(f"it was recovered from a log that {self.recovered_loss}")
         if not problems:
             problems.append("it ends before its plan did (the session was stopped, or the log was recovered from a "
                             "cut file)")
@@ -54,7 +62,8 @@ class LogCondition:
     def as_dict(self) -> dict[str, object]:
         return {"truncated": self.truncated, "damage": None if self.damage is None else self.damage.as_dict(),
                 "steps_planned": self.steps_planned, "steps_logged": self.steps_logged,
-                "steps_missing": self.steps_missing, "calibration_poses_logged": self.calibration_poses_logged}
+                "steps_missing": self.steps_missing, "calibration_poses_logged": self.calibration_poses_logged,
+                "recovered_loss": self.recovered_loss}
 
 
 def log_condition(path: str | Path) -> LogCondition:
@@ -66,7 +75,17 @@ def log_condition(path: str | Path) -> LogCondition:
     except (KeyError, ValueError):
         planned = steps[0].count if steps else None
     return LogCondition(Path(path), contents.truncated, contents.damage, planned, len(steps),
-                        sum(step.sweep == CALIBRATION_SWEEP for step in steps))
+                        sum(step.sweep == CALIBRATION_SWEEP for step in steps),
+                        _recovered_loss(contents.metadata.get(RECOVERY_METADATA_NAME)))
+
+
+def _recovered_loss(recovery: dict[str, str] | None) -> str | None:
+    """What the source of a recovered copy lost, in words (None: not a copy, or whole)."""
+    if recovery is None:
+        return None
+    lost = (["was truncated"] if recovery.get("truncated") == "true" else []) + (
+        [f"was damaged ({recovery['damage']})"] if recovery.get("damage") else [])
+    return " and ".join(lost) or None
 
 
 def incomplete_log(path: str | Path) -> LogCondition | None:

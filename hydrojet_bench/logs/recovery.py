@@ -18,7 +18,7 @@ from ..errors import UserError
 from ..files import publish
 from .reader import LogDamage, damage_of, start_time_ns
 from .records import RecordScanner
-from .format import LOG_METADATA_NAME
+from .format import LOG_METADATA_NAME, RECOVERY_METADATA_NAME
 from .writer import LIBRARY
 
 
@@ -56,12 +56,12 @@ def recover_log(src: str | Path, dst: str | Path, *, overwrite: bool = False) ->
 
     def write(partial: Path) -> RecoveryReport:
         with partial.open("wb") as handle:
-            return _copy(RecordScanner(src), Writer(handle, compression=CompressionType.ZSTD))
+            return _copy(RecordScanner(src), Writer(handle, compression=CompressionType.ZSTD), str(src))
 
     return publish(dst, "recovered log", write, overwrite=overwrite)
 
 
-def _copy(scanner: RecordScanner, writer: Writer) -> RecoveryReport:
+def _copy(scanner: RecordScanner, writer: Writer, source: str) -> RecoveryReport:
     started = False
     schemas: dict[int, int] = {0: 0}  # source id -> copy id; 0 is "no schema" in both
     channels: dict[int, int] = {}
@@ -69,12 +69,16 @@ def _copy(scanner: RecordScanner, writer: Writer) -> RecoveryReport:
     first: int | None = None
     last: int | None = None
     count = 0
+    earlier: dict[str, str] = {}
     for record in scanner:
         if not started:
             header = record if isinstance(record, Header) else Header(profile="", library=LIBRARY)
             writer.start(profile=header.profile, library=header.library)
             started = True
         if isinstance(record, Metadata):
+            if record.name == RECOVERY_METADATA_NAME:
+                earlier = record.metadata  # a copy of a copy: what the first source lost stays said
+                continue
             writer.add_metadata(record.name, record.metadata)
             if record.name == LOG_METADATA_NAME:
                 start_ns = start_time_ns(record.metadata)
@@ -93,11 +97,17 @@ def _copy(scanner: RecordScanner, writer: Writer) -> RecoveryReport:
             writer.add_attachment(record.create_time, record.log_time, record.name, record.media_type, record.data)
     if not started:
         writer.start(library=LIBRARY)
-    writer.finish()
     origin = first if start_ns is None else start_ns
 
     def session_time(log_time: int | None) -> float | None:
         return None if log_time is None or origin is None else (log_time - origin) / 10**9
 
-    return RecoveryReport(messages=count, last_t_s=session_time(last), truncated=not scanner.complete,
-                          first_t_s=session_time(first), damage=damage_of(scanner, 0, origin))
+    report = RecoveryReport(messages=count, last_t_s=session_time(last), truncated=not scanner.complete,
+                            first_t_s=session_time(first), damage=damage_of(scanner, 0, origin))
+    lost = "; ".join(filter(None, (earlier.get("damage", ""), "" if report.damage is None
+                                   else f"{source}: {report.damage.describe()}")))
+    truncated = report.truncated or earlier.get("truncated") == "true"
+    writer.add_metadata(RECOVERY_METADATA_NAME, {"source": earlier.get("source", source),
+                                                 "truncated": "true" if truncated else "false", "damage": lost})
+    writer.finish()
+    return report

@@ -163,7 +163,9 @@ def _diagnosis_columns(cell: Cell, diagnosis: Diagnosis) -> dict:
         "noise_floor_deg": diagnosis.noise_floor_deg,
         "fitted": json.dumps({c.effect: {name: [value, error] for name, (value, error) in c.parameters.items()}
                               for c in diagnosis.ranking if c.error is None}),
-        "converged": all(c.error is None for c in diagnosis.ranking),
+        # The fits the verdict rests on: the baseline's and the winner's (every fit's count
+        # is unconverged_fits).
+        "converged": bool(diagnosis.baseline.converged and (winner is None or winner.converged)),
         "found": ",".join(found.effect for found in diagnosis.found),
         "final_heldout_rmse_deg": diagnosis.found[-1].heldout_orientation_rmse_deg if diagnosis.found else None,
         "at_floor_threshold_deg": diagnosis.at_floor_threshold_deg,

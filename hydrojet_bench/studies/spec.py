@@ -42,9 +42,10 @@ import numpy as np
 from ..bench.plan_choice import choose_plan
 from ..config.loading import convert, read_toml
 from ..effects import Effect, load_effect
-from ..errors import UserError
+from ..errors import ConvergenceError, UserError
 from ..models import MODELS
 from ..profile import load_profile
+from ..twin.hidden import inert_effects
 from ..twin.setup_errors import parse_setup_error, setup_error_text
 
 Orientation = Literal["hanging", "horizontal"]
@@ -171,9 +172,15 @@ def load_study(path: Path) -> Study:
                              ("plans", plans, lambda name: name == "short" or choose_plan(name))):
         for index, name in enumerate(names):
             try:
-                load(name)
+                loaded = load(name)
             except UserError as error:
                 raise UserError(f"{source}: {key}[{index}]: {error}") from None
+            hidden = getattr(getattr(loaded, "config", None), "twin", None)
+            if hidden is not None and hidden.hidden_effects:
+                # Each cell hides what the spec says: the profile's own would be dropped.
+                raise UserError(f"{source}: {key}[{index}] = {name!r} hides {', '.join(hidden.hidden_effects)} in its "
+                                "[twin] table, which a study replaces in every cell (each cell hides what the spec "
+                                "says): give a profile without hidden_effects, and the effect as a sweep or a pair")
     sweeps = []
     for index, sweep in enumerate(spec.effects):
         key = f"effects[{index}]"
@@ -193,13 +200,22 @@ def load_study(path: Path) -> Study:
             other = _parameter(effect, name, source, f"{key}.values.{name}")
             _check_bounds(other, value, source, f"{key}.values.{name}")
             fixed.append((f"{effect.name}.{name}", value))
-        sweeps.append((effect_spec, f"{effect.name}.{parameter.name}", sizes, parameter.default, parameter.unit,
-                       tuple(sorted(fixed))))
+        qualified = f"{effect.name}.{parameter.name}"
+        for earlier, (spec_before, name_before, sizes_before, _, _, fixed_before) in enumerate(sweeps):
+            if (spec_before, name_before, fixed_before) == (effect_spec, qualified, tuple(sorted(fixed))) and \
+                    set(sizes_before) & set(sizes):
+                raise UserError(f"{source}: {key} repeats sizes of effects[{earlier}] (the same cells)")
+        sweeps.append((effect_spec, qualified, sizes, parameter.default, parameter.unit, tuple(sorted(fixed))))
     pairs = []
     for index, pair in enumerate(spec.pairs):
         key = f"pairs[{index}]"
         specs = tuple(_effect_spec(name, folder) for name in pair.effects)
         effects = [_load(s, source, f"{key}.effects[{i}]") for i, s in enumerate(specs)]
+        names = [effect.name for effect in effects]
+        for number, name in enumerate(names):
+            if name in names[:number]:
+                raise UserError(f"{source}: {key}.effects[{number}] = {pair.effects[number]!r} repeats "
+                                f"{key}.effects[{names.index(name)}]")
         known = {f"{e.name}.{p.name}": p for e in effects for p in e.parameters}
         for name, value in pair.values.items():
             if name not in known:
@@ -221,10 +237,38 @@ def load_study(path: Path) -> Study:
                 raise UserError(f"{source}: setup[{index}].sizes[{number}]: {error}") from None
             setups.append((sweep.error, tuple(size), tuple(sweep.orientations)))
     _check_cell_count(spec, sum(len(sweep[2]) for sweep in sweeps) + len(pairs), setups, source)
+    _check_each_hides_something(sweeps, pairs, source)
     return Study(name=spec.name or path.stem, source=source, profiles=profiles,
                  orientations=tuple(spec.orientations), plans=plans, models=tuple(spec.models),
                  seeds=tuple(spec.seeds), noise_scales=tuple(spec.noise_scales), none=spec.none,
                  sweeps=tuple(sweeps), pairs=tuple(pairs), setups=tuple(setups))
+
+
+def _check_each_hides_something(sweeps: list, pairs: list, source: str) -> None:
+    """Refuse a scenario whose hidden effects leave the twin's rod as it is (`inert_effects`):
+    its cells would be none cells scored as the effect's. A probe is a few solves, so a
+    sweep is probed at its parameter's default (the usual slip: a gain of 1) and at its
+    first size (other values held where the effect does nothing). An effect the probe
+    cannot apply is left to its cells, whose rows say why."""
+    for index, (spec, qualified, sizes, default, _, fixed) in enumerate(sweeps):
+        effect = load_effect(spec)
+        for number, size in enumerate(sizes):
+            if (number == 0 or size == default) and _inert([effect], {**dict(fixed), qualified: size}):
+                raise UserError(f"{source}: effects[{index}].sizes[{number}] = {size:g}: there {effect.name} leaves "
+                                "the twin's rod as it is and hides nothing (the study's none cells are that case)")
+    for index, (specs, values) in enumerate(pairs):
+        inert = _inert([load_effect(spec) for spec in specs], dict(values))
+        if inert:
+            raise UserError(f"{source}: pairs[{index}]: at the values given (defaults where none is), "
+                            f"{', '.join(inert)} leave(s) the twin's rod as it is and hide(s) nothing; give "
+                            f"pairs[{index}].values a size for each effect")
+
+
+def _inert(effects: list[Effect], values: dict[str, float]) -> tuple[str, ...]:
+    try:
+        return inert_effects(effects, values)
+    except (UserError, ConvergenceError):
+        return ()
 
 
 def _relative(name: str, folder: Path, suffix: str = "") -> str:

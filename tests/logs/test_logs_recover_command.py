@@ -9,6 +9,7 @@ from mcap.reader import make_reader
 
 from hydrojet_bench.cli import main
 from hydrojet_bench.logs import read_log
+from hydrojet_bench.logs.condition import log_condition
 
 
 def test_recover_writes_beside_the_log_and_reports_what_it_kept(tmp_path: Path, capsys) -> None:
@@ -52,9 +53,17 @@ def test_recover_keeps_the_chunks_after_a_damaged_one_and_says_what_was_lost(tmp
     damaged.write_bytes(bytes(data))
     assert main(["recover", str(damaged)]) == 0
     captured = capsys.readouterr()
-    assert f"{damaged} was complete" in captured.out
+    assert f"{damaged} ended properly" in captured.out
     assert f"wrote {tmp_path / 'damaged.recovered.mcap'}: 8 messages, t = 0.000 s to 2.300 s" in captured.out
     assert captured.err.startswith(f"warning: {damaged} is damaged: 1 damaged chunk(s) skipped (")
     assert "4 messages, session time 0.300 s to 2.000 s); kept every intact chunk" in captured.err
     kept = [m.message for m in read_log(tmp_path / "damaged.recovered.mcap").messages]
     assert kept == ["0.0", "0.1", "0.2", "0.3", "2.0", "2.1", "2.2", "2.3"]
+    # The copy is whole, but what its source lost stays said by every analysis of it.
+    condition = log_condition(tmp_path / "damaged.recovered.mcap")
+    assert not condition.whole and condition.damage is None
+    assert condition.notice().startswith(f"{tmp_path / 'damaged.recovered.mcap'}: it was recovered from a log that "
+                                         f"was damaged ({damaged}: 1 damaged chunk(s) skipped (")
+    # And a copy of the copy still says it.
+    assert main(["recover", str(tmp_path / "damaged.recovered.mcap"), "-o", str(tmp_path / "again.mcap")]) == 0
+    assert log_condition(tmp_path / "again.mcap").recovered_loss == condition.recovered_loss

@@ -18,6 +18,7 @@ from mcap.writer import Writer
 
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.logs import read_log, read_metadata, recover_log
+from hydrojet_bench.logs.format import RECOVERY_METADATA_NAME
 
 # Writes ~200 messages/s of session time = its own wall time, and prints each t_s once
 # the write has returned, until killed.
@@ -193,7 +194,10 @@ def test_recovery_of_a_truncated_log(tmp_path: Path) -> None:
         assert {m.name: m.metadata for m in reader.iter_metadata()}["bench"] == METADATA["bench"]
     recovered = read_log(tmp_path / "out.mcap")
     assert not recovered.truncated
+    # The copy's metadata: the source's, and what the source lost (the cut).
+    recovery = recovered.metadata.pop(RECOVERY_METADATA_NAME)
     assert recovered.messages == kept.messages and recovered.metadata == kept.metadata
+    assert recovery == {"source": str(cut), "truncated": "true", "damage": ""}
     assert recovered.start_time_unix_s == kept.start_time_unix_s
 
     # A complete log is copied whole.

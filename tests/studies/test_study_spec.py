@@ -55,6 +55,14 @@ from hydrojet_bench.studies.spec import load_study
     ('seeds = [0, 99999999999999999999]\n', "seeds[1] must be an integer from 0 to 2**63 - 1"),
     ('seeds = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9]\n[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\n'
      'sizes = {start = 0.5, stop = 1.0, num = 10000}\n', "100010 cells (scenarios x orientations"),
+    ('[[pairs]]\neffects = ["jet_gain", "base_compliance"]\n',
+     "pairs[0]: at the values given (defaults where none is), jet_gain, base_compliance leave(s) the twin's rod"),
+    ('[[pairs]]\neffects = ["jet_gain", "jet_gain"]\nvalues = {"jet_gain.gain_1" = 0.8}\n',
+     "pairs[0].effects[1] = 'jet_gain' repeats pairs[0].effects[0]"),
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.8]\n'
+     '[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.8, 0.9]\n',
+     "effects[1] repeats sizes of effects[0] (the same cells)"),
+    ('profiles = ["sim-mystery"]\n', "profiles[0] = 'sim-mystery' hides pressure_stiffening in its [twin] table"),
     ('none = false\n[[setup]]\nerror = "tracker_tilt_deg"\nsizes = [[1e308, 0.0]]\n',
      "setup[0].sizes[0]: setup error 'tracker_tilt_deg=1e+308,0': SetupErrors.tracker_tilt_deg must be angles "
      "from -45 to 45 degrees"),
@@ -75,7 +83,14 @@ def test_a_study_at_its_limits_loads(tmp_path: Path):
                                 'sizes = {start = 0.5, stop = 1.0, num = 10000}\n')
     with pytest.raises(UserError, match="-1e-200 is outside"):  # the range is fine, the parameter's bounds are not
         load_study(spec)
+    # Sizes where the effect does nothing are refused (a clamp compliance of 1e-200, a gain of 1).
     spec.write_text(spec.read_text().replace("-1e-200, stop = -1e-190", "1e-200, stop = 1e-190"))
+    with pytest.raises(UserError, match=r"effects\[0\].sizes\[0\] = 1e-200: there base_compliance leaves"):
+        load_study(spec)
+    spec.write_text(spec.read_text().replace("1e-200, stop = 1e-190", "1e-3, stop = 1e2"))
+    with pytest.raises(UserError, match=r"effects\[1\].sizes\[9999\] = 1: there jet_gain leaves"):
+        load_study(spec)
+    spec.write_text(spec.read_text().replace("start = 0.5, stop = 1.0", "start = 0.5, stop = 0.99"))
     study = load_study(spec)
     assert len(expand(study)) == 2 * (1 + 3 + 10000) and study.noise_scales == (50.0,)
 
