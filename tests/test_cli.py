@@ -298,3 +298,14 @@ def test_an_empty_log_is_called_empty(tmp_path, capsys):
     message = one_line_error(capsys, ["calibrate", str(empty), "-o", str(tmp_path / "p.toml")])
     assert message == (f"{empty}: no /bench/sample samples from source 'em': it has no /bench/sample messages "
                        "(an empty file: 0 bytes)")
+
+
+def test_an_output_file_given_as_a_folder_path_and_a_parameter_hidden_twice_are_refused(tmp_path, capsys):
+    # Path("out/") is Path("out"): without the check a file named like the folder was written.
+    with pytest.raises(SystemExit) as exit_info:
+        main(["simulate", "-o", f"{tmp_path}/out/"])
+    assert exit_info.value.code == 2 and "a folder; give a file name" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+    assert main(["simulate", "-o", str(tmp_path / "x.csv"), "--hidden", "jet_gain:gain_1=0.8",
+                 "--hidden", "jet_gain:gain_1=0.7"]) == 2
+    assert "jet_gain.gain_1 is already 0.8 from an earlier --hidden" in capsys.readouterr().err

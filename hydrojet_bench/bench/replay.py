@@ -68,8 +68,9 @@ def read_session(path: Path, profile: RigProfile | str | Path | None = None) -> 
     rig = rig_profile_of_log(path, profile, contents.metadata)
     records = contents.on(Step)
     if not records:
-        raise NoSettledSteps(f"{path}: no settled steps ({STEP_TOPIC}) in this log; "
-                             "was it written by `hydrojet-bench run`?")
+        cut = " (it is truncated: the session may have stopped before its first step settled)" \
+            if contents.truncated else "; was it written by `hydrojet-bench run`?"
+        raise NoSettledSteps(f"{path}: no settled steps ({STEP_TOPIC}) in this log{cut}")
     with_positions = all(row.base_position_m is not None for row in records)
 
     def column(key: str) -> np.ndarray:

@@ -12,7 +12,6 @@ chooses; the command says which rows it used and why.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
@@ -43,7 +42,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("calibrate", help="fit model parameters to the calibration poses")
     add_input_arguments(parser)
     add_model_arguments(parser, default=COSSERAT.model)
-    parser.add_argument("-o", "--output", type=Path, required=True, help="parameter file to write (TOML); replaced if it exists: it is derived "
+    parser.add_argument("-o", "--output", type=render.file_path, required=True, help="parameter file to write (TOML); replaced if it exists: it is derived "
                         "from the data, and calibrating again is meant to update it")
     parser.add_argument("--position-weight", type=float, default=DEFAULT_POSITION_WEIGHT_RAD_PER_M,
                         metavar="RAD_PER_M", help="weight of tip position errors when positions were "

@@ -27,7 +27,7 @@ from ..analysis.diagnosis.evidence import NOISE_GAP_PER_FLOOR
 from ..analysis.diagnosis.fitting import scored_as_diagnosed
 from ..analysis.diagnosis.noise import repeatability_floor
 from ..analysis.diagnosis.separate import separating_plan, write_separating_plan
-from ..analysis.diagnosis.setup import SETUP, corrected_profile_text, is_setup
+from ..analysis.diagnosis.setup import SETUP, corrected_profile_text, is_setup, separating_measurement
 from ..plans import DEFAULT_SETTLE_S
 from ..inputs import load_dataset
 from ..data.dataset import Dataset
@@ -359,6 +359,16 @@ def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Name
         if args.export_profile is not None:  # written already: only the check is left
             print_next(console, "check the corrected profile with",
                        [command("diagnose", args.input, "--profile", args.export_profile, *known)])
+            return
+        tied = [name for name in diagnosis.alternatives if not is_setup(name)]
+        if tied:
+            # Physics explains the data as well: correcting the profile first could
+            # write a wrong correction.
+            print_next(console, f"first tell {diagnosis.verdict} from {', '.join(tied)} ("
+                                f"{separating_measurement(diagnosis.verdict)}); if it is the setup, write the "
+                                "corrected profile and check it with", [
+                command("diagnose", *data, *known, "--export-profile", "fixed.toml"),
+                command("diagnose", args.input, "--profile", "fixed.toml", *known)])
             return
         print_next(console, "write the corrected profile and check it with", [
             command("diagnose", *data, *known, "--export-profile", "fixed.toml"),

@@ -20,7 +20,7 @@ from . import render
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("recover", help="rewrite an unfinished or damaged session log into a valid one")
     parser.add_argument("input", type=Path, metavar="INPUT", help="a session log (.mcap), possibly cut off by a crash")
-    parser.add_argument("-o", "--output", type=Path, default=None,
+    parser.add_argument("-o", "--output", type=render.file_path, default=None,
                         help="where to write (default: INPUT with .recovered.mcap instead of .mcap)")
     parser.add_argument("--overwrite", action="store_true", help="replace the output file if it exists")
     parser.set_defaults(func=run)

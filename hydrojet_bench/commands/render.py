@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -30,6 +31,14 @@ EXIT_CODES = {0: "done", 1: "internal error (a bug: it prints a traceback)",
               2: "a mistake in the command line or its inputs (one line on standard error naming the file "
                  "and field)", 130: "interrupted (Ctrl-C)",
               141: "standard output closed before the end (a reader such as `head` stopped early)"}
+
+
+def file_path(text: str) -> Path:
+    """An argparse type for a file to write: a path ending in a separator names a folder
+    (``Path`` would drop it, and a file named like the folder would be written)."""
+    if text.endswith(("/", os.sep)):
+        raise argparse.ArgumentTypeError(f"{text!r} ends in {text[-1]!r}, a folder; give a file name")
+    return Path(text)
 
 
 def add_json_argument(parser: argparse.ArgumentParser, what: str = "the figures") -> None:

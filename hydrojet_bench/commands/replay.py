@@ -18,6 +18,7 @@ from ..estimation.setup_warnings import calibration_warnings
 from ..model_choice import choose_model
 from ..profile import load_profile
 from . import render
+from .calibrate import UNTRUSTED
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
 from .figure_options import add_format_argument
 from .log_notice import warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere
@@ -32,7 +33,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     render.add_json_argument(parser)
     parser.add_argument("--report", type=Path, metavar="DIR", help="write figures to this folder")
     add_format_argument(parser)
-    render.add_exit_codes(parser, {1: "the replayed errors are not finite (no answer)"})
+    render.add_exit_codes(parser, {1: "the replayed errors are not finite (no answer)",
+                                   UNTRUSTED: "its own calibration (another model, no --params) did not converge "
+                                              "or left a value on a bound: the figures are of untrusted parameters"})
     parser.set_defaults(func=run)
 
 
@@ -77,4 +80,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         render.write_json(args.json, {**result.as_dict(), "profile_mismatch": profile_mismatch,
                                       "held_out": fitted_on is None})
-    return 0 if np.isfinite(result.results["ref"].overall.orientation_rmse_deg) else 1
+    if not np.isfinite(result.results["ref"].overall.orientation_rmse_deg):
+        return 1
+    calibration = result.calibration
+    return UNTRUSTED if calibration is not None and (not calibration.converged or calibration.at_bound) else 0

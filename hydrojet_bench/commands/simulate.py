@@ -9,7 +9,6 @@ are created, as for `run --log`); an existing one is replaced only with --overwr
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from ..data.csv_io import write_csv
 from ..errors import UserError
@@ -25,7 +24,7 @@ from .next_steps import command, print_next
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("simulate", help="record the paper's protocol on the digital twin (CSV)")
-    parser.add_argument("-o", "--output", type=Path, required=True, help="CSV file to write (a new file)")
+    parser.add_argument("-o", "--output", type=render.file_path, required=True, help="CSV file to write (a new file)")
     parser.add_argument("--overwrite", action="store_true", help="replace the output file if it exists")
     parser.add_argument("--profile", default="sim", help="rig profile (default: sim)")
     parser.add_argument("--hidden", action="append", default=[], metavar="EFFECT[=VALUE]",

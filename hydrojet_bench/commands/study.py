@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..errors import UserError
 from . import render
 
 
@@ -35,6 +36,10 @@ def run(args: argparse.Namespace) -> int:
     from ..api import study
 
     progress = render.progress_console()
+    if args.spec is None and args.report_only is None:
+        raise UserError("study: give a SPEC.toml to run, or --report-only DIR to rebuild a report")
+    if args.workers < 1:
+        raise UserError(f"--workers must be at least 1, got {args.workers}")
     if args.report_only is not None:
         result = study(output=args.report_only, report_only=True)
     else:

@@ -112,6 +112,12 @@ def rig_profile_of_log(path: Path, profile: RigProfile | str | Path | None,
             raise UserError(f"{where}: not valid JSON: {error}") from None
     # Logs written before the resolved profile was embedded: the file's own text.
     text = bench.get("profile_toml")
+    if not text and not metadata and not _empty(path):
+        # The session's metadata comes right after the header: a log without any was cut
+        # before it (or written by another program).
+        raise UserError(f"{path}: no metadata at all ({Path(path).stat().st_size} bytes): the log was cut before "
+                        "the session wrote its metadata, or another program wrote it (give its rig profile with "
+                        "--profile if it holds a session's samples)")
     if not text:
         raise UserError(f"{path}: the log embeds no rig profile (metadata bench.profile_toml){_empty(path)}; "
                         "give one with --profile")

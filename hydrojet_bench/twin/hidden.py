@@ -77,7 +77,11 @@ def parse_hidden(specs: Sequence[str], option: str = "--hidden") -> HiddenChoice
             if not bounds.lower <= number <= bounds.upper:
                 raise UserError(f"{option} {spec}: {effect.name}.{name} = {number:g} is outside "
                                 f"[{bounds.lower:g}, {bounds.upper:g}] {bounds.unit}")
-            values[f"{effect.name}.{name}"] = number
+            key = f"{effect.name}.{name}"
+            if key in values and values[key] != number:
+                raise UserError(f"{option} {spec}: {key} is already {values[key]:g} from an earlier {option}; "
+                                "give each parameter once")
+            values[key] = number
     return HiddenChoice(tuple(effects.values()), tuple(values.items()))
 
 

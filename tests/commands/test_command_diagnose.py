@@ -140,3 +140,27 @@ def test_a_turned_base_sensor_gets_a_corrected_profile_that_leaves_nothing_to_ex
     again = json.loads(second.read_text())
     assert (again["verdict_kind"], again["verdict"]) == ("none", "none")
     assert again["baseline"]["heldout_orientation_rmse_deg"] <= 1.2 * again["noise_floor_deg"]
+
+
+def test_a_setup_verdict_tied_with_physics_asks_for_the_separating_measurement_first():
+    """A tracker tilt tied with a tip pull (4 BIC points apart on a hanging rod): writing
+    the corrected profile first could write a wrong correction."""
+    from argparse import Namespace
+    from types import SimpleNamespace
+
+    from rich.console import Console
+
+    from hydrojet_bench.commands.diagnose import print_next_steps
+
+    def next_lines(alternatives):
+        diagnosis = SimpleNamespace(verdict="tracker_tilt", verdict_kind="setup", alternatives=alternatives,
+                                    model="cosserat", setup_fix=SimpleNamespace(profile_key="gravity.in_tracker_m_s2"))
+        console = Console(record=True, width=400)
+        print_next_steps(console, diagnosis, Namespace(input="s.csv", profile=None, effect=[], export_profile=None),
+                         [], None)
+        return " ".join(console.export_text().split())
+
+    assert next_lines(("tip_pull",)).startswith(
+        "Next: first tell tracker_tilt from tip_pull (hold the jets off and compare the base IMU's gravity with "
+        "the profile's (run's level check)); if it is the setup, write the corrected profile")
+    assert next_lines(("base_sensor_mounting",)).startswith("Next: write the corrected profile and check it with")
