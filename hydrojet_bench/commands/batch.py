@@ -1,7 +1,8 @@
 """`hydrojet-bench batch diagnose LOGS...` and `batch replay LOGS...`: every log of a lab
 at once, on the study engine (Dask distributed: local worker processes, or a cluster
 with --scheduler). One row per log: a table on stdout, ``--json``, and Parquet rows
-under ``-o DIR`` (a rerun into the same DIR skips the logs already done).
+under ``-o DIR`` (a rerun into the same DIR reuses the rows of logs unchanged since and
+not failed).
 """
 
 from __future__ import annotations

@@ -208,11 +208,11 @@ class PathPredictor:
     def carry(self, steps: Dataset) -> None:
         """Follow the path through ``steps`` (the rows recorded before the ones to predict,
         in order), predicting none of them: the next step starts from the shape they end
-        in, Ref. and online estimation alike (the estimate itself is not changed; a
-        path the model cannot follow leaves none). A rod
-        with several equilibria under one load (a heavy tip on a soft horizontal rod)
-        sits on the one its history led it to; a path predicted from a fresh solve at its
-        first step can start on another and stay there."""
+        in, Ref. and online estimation alike (the estimate itself is not changed; a path
+        the model cannot follow leaves none). A rod with several equilibria under one load
+        (a heavy tip on a soft horizontal rod) sits on the one its history led it to; a
+        path predicted from a fresh solve at its first step can start on another and stay
+        there."""
         if not len(steps):
             return
         try:
