@@ -238,7 +238,8 @@ def _gap_line(reference: Breakdowns, noise: NoiseFloor | None) -> str:
     if noise is None:
         return f"{gap}: no noise floor to judge it by (no sweep repeats)."
     verdict = noise_only_gap(loading.hysteresis_gap_deg, loading.matched_pairs, noise.orientation_deg)
-    judged = ("beyond noise: the branches differ (clamp play or friction?)" if verdict.beyond_noise
+    judged = ("beyond noise: the branches differ (clamp play, friction, or a rod with several shapes under one "
+              "load?)" if verdict.beyond_noise
               else "within noise")
     return (f"{gap}; noise alone gives {verdict.noise_only_deg:.3f} deg (up to {verdict.limit_deg:.3f} deg) at the "
             f"noise floor of {noise.orientation_deg:.3f} deg ({noise.method}, as diagnose measures it): {judged}.")

@@ -10,6 +10,9 @@ on stderr shows done/total, rate, ETA and failures.
 from __future__ import annotations
 
 import contextlib
+import logging
+import signal
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -61,9 +64,29 @@ def dask_client(scheduler: str | None = None, workers: int = 2) -> Iterator[Any]
         return
     if workers < 1:
         raise UserError(f"--workers must be at least 1, got {workers}")
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
+    with _workers_ignoring_ctrl_c():
+        # Workers log errors only: their warnings on a stop ("task cancelled", "still
+        # alive, killing") are the stop itself, and a failed cell's row says what failed.
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
+    with cluster, Client(cluster) as client:
         yield client
+
+
+@contextlib.contextmanager
+def _workers_ignoring_ctrl_c() -> Iterator[None]:
+    """Start worker processes with SIGINT ignored (a process started so keeps it ignored,
+    and Python then installs no KeyboardInterrupt handler): Ctrl-C reaches the terminal's
+    whole process group, and each worker printed its own traceback before the study
+    stopped them. The study itself still stops on Ctrl-C and closes the cluster."""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers are the main thread's to set
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def run_tasks(connect: Callable[[], contextlib.AbstractContextManager[Any]], function: Callable[[Any], dict],

@@ -41,3 +41,27 @@ def test_a_killed_study_resumes_where_it_stopped(tmp_path: Path):
 
     again = run_study(str(spec), "-o", str(out), "--workers", "1")
     assert "0 cells run (6 already done)" in " ".join(again.stdout.split())
+
+
+def test_ctrl_c_stops_a_study_with_one_line(tmp_path: Path):
+    """Ctrl-C at a terminal reaches the whole process group, Dask's worker processes
+    too: each printed its own traceback and warnings before the study stopped."""
+    spec = write_spec(tmp_path, TINY)
+    out = tmp_path / "out"
+    process = subprocess.Popen(study_command(str(spec), "-o", str(out), "--workers", "2"), stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + FIRST_ROW_TIMEOUT_S
+        while not list((out / "rows").glob("*.parquet")):
+            assert process.poll() is None, "the study ended before it stored a row"
+            assert time.monotonic() < deadline, "no row stored in time"
+            time.sleep(0.1)
+        os.killpg(process.pid, signal.SIGINT)
+        _, err = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait(timeout=30)
+    assert process.returncode == 130, err
+    assert "Traceback" not in err and "WARNING" not in err, err
+    assert err.rstrip().endswith("interrupted")
