@@ -82,7 +82,10 @@ def run(args: argparse.Namespace) -> int:
                             error_row=lambda task, text: log_row(task, columns, text), label="logs")
         table = store.table({task.id for task in tasks})
     order = {task.path: index for index, task in enumerate(tasks)}
-    rows = sorted((render.json_row(row) for row in table.to_dict("records")), key=lambda row: order[row["log"]])
+    # pandas holds an integer column with gaps as floats: counts are integers again here.
+    integers = [name for name, kind in columns.items() if kind == "int64"]
+    rows = sorted(({**row, **{name: int(row[name]) for name in integers if row[name] is not None}}
+                   for row in map(render.json_row, table.to_dict("records"))), key=lambda row: order[row["log"]])
     console = render.console_for(args)
     view = render.table(f"batch {args.action}: {len(rows)} logs", labels=("log",), numbers=shown)
     view.add_column("error")
