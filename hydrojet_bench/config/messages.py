@@ -179,7 +179,7 @@ def _member_for(annotation: Any, part: str | int | None) -> Any:
         return annotation
     for member in typing.get_args(annotation):
         origin = typing.get_origin(member)
-        if (origin is tuple and isinstance(part, int)) or \
+        if (origin in (tuple, list) and isinstance(part, int)) or \
                 (isinstance(part, str) and (origin is dict or _struct_in(member) is not None)):
             return member
     return annotation

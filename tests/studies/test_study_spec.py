@@ -55,6 +55,8 @@ from hydrojet_bench.studies.spec import load_study
     ('seeds = [0, 99999999999999999999]\n', "seeds[1] must be an integer from 0 to 2**63 - 1"),
     ('seeds = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9]\n[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\n'
      'sizes = {start = 0.5, stop = 1.0, num = 10000}\n', "100010 cells (scenarios x orientations"),
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = ["0.8"]\n',
+     "effects[0].sizes[0] must be a number, got '0.8'"),
     ('[[pairs]]\neffects = ["jet_gain", "base_compliance"]\n',
      "pairs[0]: at the values given (defaults where none is), jet_gain, base_compliance leave(s) the twin's rod"),
     ('[[pairs]]\neffects = ["jet_gain", "jet_gain"]\nvalues = {"jet_gain.gain_1" = 0.8}\n',
