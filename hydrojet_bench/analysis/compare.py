@@ -100,12 +100,17 @@ def compare_methods(model: ShootingModel, params: ModelParameters, steps: Datase
     return compare_steps(predictor.predict(steps), steps)
 
 
+def validation_rows(steps: Dataset) -> np.ndarray:
+    """The rows predictions are compared on (boolean mask): the sweeps (sweep >= 0), or
+    every row of a table without sweeps."""
+    sweeps = steps.sweep >= 0
+    return sweeps if sweeps.any() else np.ones(len(steps), dtype=bool)
+
+
 def lead_in(steps: Dataset) -> Dataset:
-    """The rows recorded before the first validation step (sweep >= 0; none when there are
-    no sweeps): the path a prediction of the sweeps goes through first, as the rod did
-    (`PathPredictor.carry`)."""
-    sweeps = np.flatnonzero(steps.sweep >= 0)
-    return steps.select(np.arange(sweeps[0] if len(sweeps) else 0))
+    """The rows recorded before the first validation row (none without sweeps): the path a
+    prediction of the sweeps goes through first, as the rod did (`PathPredictor.carry`)."""
+    return steps.select(np.arange(int(np.argmax(validation_rows(steps))) if len(steps) else 0))
 
 
 def measured_bend_deg(steps: Dataset) -> np.ndarray:

@@ -25,7 +25,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from ..analysis.compare import compare_methods, compare_steps, lead_in
+from ..analysis.compare import compare_methods, compare_steps, lead_in, validation_rows
 from ..analysis.diagnosis import DiagnosisSettings, diagnose as run_diagnosis
 from ..analysis.diagnosis.noise import repeatability_floor
 from ..bench.replay import live_difference_deg, logged_steps, read_session, replay as replay_session
@@ -105,7 +105,7 @@ def compare(data: Data, params: Params, *, baseline: Params = None, online: bool
     # A session log's own settled steps are the rows its live estimator predicted.
     logged = logged_steps(path, profile) if path.suffix.lower() == ".mcap" else None
     steps = logged if logged is not None else _measurements(data, profile).steps
-    validation = steps.select(steps.sweep >= 0) if (steps.sweep >= 0).any() else steps
+    validation = steps.select(validation_rows(steps))
     if len(validation) == 0:
         raise UserError(f"{path}: no steps to compare")
     settings = OnlineSettings() if online else None

@@ -60,12 +60,13 @@ def comparison_steps(path: Path, profile: str | None,
     the rows its live estimator predicted; else `load_steps`, or ``loaded`` when the
     caller has them) and the validation steps among them (sweep >= 0; all of them when
     there are no sweeps)."""
+    from ..analysis.compare import validation_rows
     from ..bench.replay import logged_steps
 
     logged = logged_steps(path, profile) if Path(path).suffix.lower() == ".mcap" else None
     profile_used, steps = ((logged.profile, logged) if logged is not None
                            else loaded if loaded is not None else load_steps(path, profile))
-    validation = steps.select(steps.sweep >= 0) if (steps.sweep >= 0).any() else steps
+    validation = steps.select(validation_rows(steps))
     if len(validation) == 0:
         raise UserError(f"{path}: no steps to compare")
     return profile_used, steps, validation

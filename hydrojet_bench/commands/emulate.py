@@ -12,6 +12,8 @@ from __future__ import annotations
 import argparse
 import time
 
+from drivers.valve.protocol import DEFAULT_WATCHDOG_MS
+
 from ..errors import UserError
 from . import render
 
@@ -20,7 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("emulate", help="serve a device emulator on a pty until Ctrl-C")
     parser.add_argument("device", choices=("aurora", "valves"), help="which device to emulate")
     parser.add_argument("--watchdog-ms", type=float,
-                        help="valves: firmware watchdog period in ms, 1..65535 (default 500)")
+                        help=f"valves: firmware watchdog period in ms, 1..65535 (default {DEFAULT_WATCHDOG_MS})")
     parser.add_argument("--profile", default="sim",
                         help="sim profile whose digital twin drives the emulator (default: sim)")
     parser.add_argument("--static", action="store_true",
@@ -34,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--watchdog-ms is the valve controller's; the {args.device} emulator has none")
     plant = _plant(args)
     if args.device == "valves":
-        watchdog_ms = 500.0 if args.watchdog_ms is None else args.watchdog_ms
+        watchdog_ms = DEFAULT_WATCHDOG_MS if args.watchdog_ms is None else args.watchdog_ms
         # The firmware holds the period in whole milliseconds, 16 bits.
         if not 1 <= watchdog_ms <= 0xFFFF:
             raise UserError(f"--watchdog-ms must be 1..65535 (the firmware's whole milliseconds), got {watchdog_ms:g}")

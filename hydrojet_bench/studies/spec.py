@@ -181,7 +181,7 @@ def load_study(path: Path) -> Study:
                 raise UserError(f"{source}: {key}[{index}] = {name!r} hides {', '.join(hidden.hidden_effects)} in its "
                                 "[twin] table, which a study replaces in every cell (each cell hides what the spec "
                                 "says): give a profile without hidden_effects, and the effect as a sweep or a pair")
-    sweeps = []
+    sweeps, sweep_effects = [], []
     for index, sweep in enumerate(spec.effects):
         key = f"effects[{index}]"
         effect_spec = _effect_spec(sweep.effect, folder)
@@ -206,7 +206,8 @@ def load_study(path: Path) -> Study:
                     set(sizes_before) & set(sizes):
                 raise UserError(f"{source}: {key} repeats sizes of effects[{earlier}] (the same cells)")
         sweeps.append((effect_spec, qualified, sizes, parameter.default, parameter.unit, tuple(sorted(fixed))))
-    pairs = []
+        sweep_effects.append(effect)
+    pairs, pair_effects = [], []
     for index, pair in enumerate(spec.pairs):
         key = f"pairs[{index}]"
         specs = tuple(_effect_spec(name, folder) for name in pair.effects)
@@ -223,6 +224,7 @@ def load_study(path: Path) -> Study:
                                 f"known: {', '.join(sorted(known))}")
             _check_bounds(known[name], value, source, f"{key}.values.{name}")
         pairs.append((specs, tuple(sorted(pair.values.items()))))
+        pair_effects.append(effects)
     setups = []
     for index, sweep in enumerate(spec.setup):
         _check_no_repeats([tuple(size) for size in sweep.sizes], source, f"setup[{index}].sizes")
@@ -237,27 +239,27 @@ def load_study(path: Path) -> Study:
                 raise UserError(f"{source}: setup[{index}].sizes[{number}]: {error}") from None
             setups.append((sweep.error, tuple(size), tuple(sweep.orientations)))
     _check_cell_count(spec, sum(len(sweep[2]) for sweep in sweeps) + len(pairs), setups, source)
-    _check_each_hides_something(sweeps, pairs, source)
+    _check_each_hides_something(sweeps, sweep_effects, pairs, pair_effects, source)
     return Study(name=spec.name or path.stem, source=source, profiles=profiles,
                  orientations=tuple(spec.orientations), plans=plans, models=tuple(spec.models),
                  seeds=tuple(spec.seeds), noise_scales=tuple(spec.noise_scales), none=spec.none,
                  sweeps=tuple(sweeps), pairs=tuple(pairs), setups=tuple(setups))
 
 
-def _check_each_hides_something(sweeps: list, pairs: list, source: str) -> None:
+def _check_each_hides_something(sweeps: list, sweep_effects: list[Effect], pairs: list,
+                                 pair_effects: list[list[Effect]], source: str) -> None:
     """Refuse a scenario whose hidden effects leave the twin's rod as it is (`inert_effects`):
     its cells would be none cells scored as the effect's. A probe is a few solves, so a
     sweep is probed at its parameter's default (the usual slip: a gain of 1) and at its
     first size (other values held where the effect does nothing). An effect the probe
     cannot apply is left to its cells, whose rows say why."""
-    for index, (spec, qualified, sizes, default, _, fixed) in enumerate(sweeps):
-        effect = load_effect(spec)
+    for index, ((_, qualified, sizes, default, _, fixed), effect) in enumerate(zip(sweeps, sweep_effects)):
         for number, size in enumerate(sizes):
             if (number == 0 or size == default) and _inert([effect], {**dict(fixed), qualified: size}):
                 raise UserError(f"{source}: effects[{index}].sizes[{number}] = {size:g}: there {effect.name} leaves "
                                 "the twin's rod as it is and hides nothing (the study's none cells are that case)")
-    for index, (specs, values) in enumerate(pairs):
-        inert = _inert([load_effect(spec) for spec in specs], dict(values))
+    for index, ((_, values), effects) in enumerate(zip(pairs, pair_effects)):
+        inert = _inert(effects, dict(values))
         if inert:
             raise UserError(f"{source}: pairs[{index}]: at the values given (defaults where none is), "
                             f"{', '.join(inert)} leave(s) the twin's rod as it is and hide(s) nothing; give "

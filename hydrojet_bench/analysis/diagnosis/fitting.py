@@ -78,7 +78,7 @@ from ...geometry import body_rotation_error, matrix_from_quat
 from ...models import make_model
 from ...models.shooting import PrbModel, ShootingModel, tip_sensor_positions_in_base_sensor_m
 from ...params import ModelParameters, with_parameters
-from ..compare import compare
+from ..compare import compare, validation_rows
 from ..metrics import ErrorSummary
 from .measurements import tip_sensor_offset_in_tip_m, tip_sensor_position_in_base_m
 from .split import Split
@@ -221,8 +221,7 @@ def scored_as_diagnosed(model: ShootingModel, params: ModelParameters, steps: Da
     held at the steps' mean when the base is static (`session_gravity`). Per-step gravity
     would let a model follow the base sensor's noise, below the floor diagnose measures."""
     predictions, _ = predict_path(model, params, steps, session_gravity(steps))
-    sweeps = steps.sweep >= 0
-    rows = sweeps if sweeps.any() else np.ones(len(steps), dtype=bool)
+    rows = validation_rows(steps)
     return compare(predictions.select(rows), steps.select(rows)).overall
 
 
