@@ -47,7 +47,7 @@ def test_perf_writes_json_with_every_figure_and_its_target(tmp_path):
     assert figures["imu_fusion"]["update_us"] > 0 and figures["imu_fusion"]["target_us"] == 10.0
     # The diagnosis is timed after a first run that loads (or compiles) its kernels.
     diagnosis = figures["diagnose_229_steps"]
-    assert diagnosis["warmup_s"] > 0 and diagnosis["seconds"] > 0 and diagnosis["candidates"] == 11
+    assert diagnosis["warmup_s"] > 0 and diagnosis["seconds"] > 0 and diagnosis["candidates"] == 12
 
 
 def test_user_mistakes_are_one_line_without_traceback(tmp_path):

@@ -239,7 +239,7 @@ def _twin_session():
 
 
 def _diagnose_figure(steps) -> dict:
-    """One `diagnose` of the twin session's 229 steps: every library candidate (eleven), the default
+    """One `diagnose` of the twin session's 229 steps: every library candidate (twelve), the default
     worker processes. A single run, not a median: it takes seconds, and perf must stay
     short. After a first run, whose time is warmup_s: the candidates' kernels that no
     other figure calls load in the worker processes then, or, on a cold cache, compile

@@ -19,6 +19,7 @@ from .jet_misalignment import JetMisalignment
 from .nonlinear_elasticity import NonlinearElasticity
 from .pressure_stiffening import PressureStiffening
 from .sensor_mounting import SensorMounting
+from .shear_extension import ShearExtension
 from .stiffness_profile import StiffnessProfile
 from .tip_pull import TipPull
 from .user import checked_effect
@@ -30,7 +31,7 @@ from .user import checked_effect
 LIBRARY: dict[str, type] = {
     effect.name: effect
     for effect in (Gravity, JetGain, JetMisalignment, PressureStiffening, NonlinearElasticity,
-                   AnisotropicStiffness, StiffnessProfile, BaseCompliance, BaseHysteresis,
+                   AnisotropicStiffness, StiffnessProfile, ShearExtension, BaseCompliance, BaseHysteresis,
                    SensorMounting, TipPull)
 }
 

@@ -7,6 +7,8 @@ work unchanged in both the Cosserat and the PRB model:
 
 * constitutive law: bending/torsional stiffness and intrinsic curvature as functions of
   arc length (sampled on ``arc_length_m``), plus a cubic strain-stiffening coefficient;
+* section strain: shear and axial compliance (none: the paper's inextensible,
+  unshearable rod);
 * distributed loads: force per length (base frame) and moment per length (body frame);
 * tip loads: follower force/moment (tip frame, e.g. the jets and w_d) and dead forces
   applied at a point given in the tip frame (e.g. the capsule's weight);
@@ -61,6 +63,10 @@ class RodProblem:
     intrinsic_curvature_in_body_1_m: np.ndarray
     # m_b = K (u - u0 + beta |u_b - u0_b|^2 (u_b - u0_b)) on the bending components (m^2).
     cubic_stiffening_m2: float = 0.0
+    # Section strain v = e3 + C n_body at each sample point: C's diagonal (shear x, shear y,
+    # extension), 1/N, i.e. 1 / (kappa G A) and 1 / (E A); zeros (the default) keep the
+    # rod inextensible and unshearable.
+    strain_compliance_in_body_1_n: np.ndarray = field(default=None)  # type: ignore[assignment]
     # Distributed loads, at each sample point.
     distributed_force_in_base_n_m: np.ndarray = field(default=None)  # type: ignore[assignment]
     distributed_moment_in_body_nm_m: np.ndarray = field(default=None)  # type: ignore[assignment]
@@ -95,6 +101,8 @@ class RodProblem:
             self.distributed_force_in_base_n_m = np.zeros((samples, 3))
         if self.distributed_moment_in_body_nm_m is None:
             self.distributed_moment_in_body_nm_m = np.zeros((samples, 3))
+        if self.strain_compliance_in_body_1_n is None:
+            self.strain_compliance_in_body_1_n = np.zeros((samples, 3))
 
     @classmethod
     def nominal(cls, params: ModelParameters, jet_forces_n: np.ndarray,

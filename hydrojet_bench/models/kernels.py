@@ -21,13 +21,16 @@ left as calls, the 18-number state went through memory at every stage and a shot
 cost twice as much.
 
 The argument ``beta`` says which section law and loads a kernel carries: a float is the
-general rod (cubic coefficient beta of the section law, possibly 0, and any distributed
-moment in the profile), None the plain rod (linear section law, no distributed moment).
+general rod (cubic coefficient beta of the section law, possibly 0, any distributed
+moment and any strain compliance in the profile: a section that shears and stretches,
+v = e3 + C n_body), None the plain rod (linear section law, no distributed moment,
+inextensible and unshearable).
 Numba compiles a kernel per argument type and drops the branches a None rules out, so
-the plain rod, every library effect but nonlinear elasticity, gets a shot without the
-Newton solve of the section law and the distributed-moment products: a fifth less time
-per shot (2.0 -> 1.55 us) than the general kernel, which tests for them at every RK4
-stage, and a tenth less per tangent shot.
+the plain rod, every library effect but nonlinear elasticity and shear_extension, gets
+a shot without the Newton solve of the section law, the distributed-moment products and
+the strain: a fifth less time per shot (2.0 -> 1.55 us, before the strain) than the
+general kernel, which tests for them at every RK4 stage, and a tenth less per tangent
+shot.
 
 Every shot stores its nodes, even one whose shape nobody reads (a Jacobian's): a flag
 saying whether to store cost 2-4 % of a warm solve as a run-time test in the RK4 loop,
@@ -66,7 +69,8 @@ INTRINSIC_CURVATURE = 3  # u0 in the body frame
 DISTRIBUTED_FORCE = 6  # base frame, per unit length
 DISTRIBUTED_MOMENT = 9  # body frame, per unit length
 COMPLIANCE = 12  # 1 / stiffness: multiplications, not divisions, in the hot loop
-PROFILE_COLUMNS = 15
+STRAIN_COMPLIANCE = 15  # body frame: shear x, shear y, extension per unit internal force
+PROFILE_COLUMNS = 18
 
 # Fast-math flags for the innermost arithmetic only: fused multiply-add and reciprocal
 # multiplication change results in the last bit; no flag that assumes away NaN or inf,
@@ -174,6 +178,30 @@ def _moment_load(profile, row, load_scale, beta):
 
 
 @njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
+def _strain(e, r00, r01, r02, r10, r11, r12, r20, r21, r22, nx, ny, nz):
+    """The section's strain v = e3 + C_se R^T n under the internal force n (base frame),
+    and p' = R v: ``(vx, vy, vz, tx, ty, tz)``. ``e`` is the strain compliance C_se
+    (body frame: shear x, shear y, extension; `_strain_compliance`), None on the plain rod,
+    which is inextensible and unshearable (the paper's v = e3)."""
+    if e is not None:
+        ex, ey, ez = e
+        vx = ex * (r00 * nx + r10 * ny + r20 * nz)
+        vy = ey * (r01 * nx + r11 * ny + r21 * nz)
+        vz = 1.0 + ez * (r02 * nx + r12 * ny + r22 * nz)
+        return (vx, vy, vz, r00 * vx + r01 * vy + r02 * vz, r10 * vx + r11 * vy + r12 * vz,
+                r20 * vx + r21 * vy + r22 * vz)
+    return 0.0, 0.0, 1.0, r02, r12, r22
+
+
+@njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
+def _strain_compliance(profile, row, beta):
+    """The strain compliance C_se at a sample point; None on the plain rod."""
+    if beta is None:
+        return None
+    return profile[row, STRAIN_COMPLIANCE], profile[row, STRAIN_COMPLIANCE + 1], profile[row, STRAIN_COMPLIANCE + 2]
+
+
+@njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
 def _cosserat_derivative(y, profile, row, load_scale, beta):
     """Right-hand side of eqs. 21 in the base frame, on the state as an 18-tuple, and the
     curvature u it used. Tuples stay in registers; with arrays numba cannot prove the
@@ -188,18 +216,20 @@ def _cosserat_derivative(y, profile, row, load_scale, beta):
     fx = load_scale * profile[row, DISTRIBUTED_FORCE]
     fy = load_scale * profile[row, DISTRIBUTED_FORCE + 1]
     fz = load_scale * profile[row, DISTRIBUTED_FORCE + 2]
+    # p' = R v: the general rod may shear and stretch.
+    _, _, _, tx, ty, tz = _strain(_strain_compliance(profile, row, beta),
+                                  r00, r01, r02, r10, r11, r12, r20, r21, r22, nx, ny, nz)
     # m' = -p' x n - R l; the plain rod (beta None) has no l.
-    mx = -(r12 * nz - r22 * ny)
-    my = -(r22 * nx - r02 * nz)
-    mz = -(r02 * ny - r12 * nx)
+    mx = -(ty * nz - tz * ny)
+    my = -(tz * nx - tx * nz)
+    mz = -(tx * ny - ty * nx)
     if beta is not None:
         lx, ly, lz = _moment_load(profile, row, load_scale, beta)
         mx -= r00 * lx + r01 * ly + r02 * lz
         my -= r10 * lx + r11 * ly + r12 * lz
         mz -= r20 * lx + r21 * ly + r22 * lz
     return (
-        # p' = R e3 (inextensible, unshearable: the paper's v = e3).
-        r02, r12, r22,
+        tx, ty, tz,
         # R' = R hat(u).
         r01 * uz - r02 * uy, r02 * ux - r00 * uz, r00 * uy - r01 * ux,
         r11 * uz - r12 * uy, r12 * ux - r10 * uz, r10 * uy - r11 * ux,
@@ -234,16 +264,17 @@ def _curvature_compliance(profile, row, load_scale, beta, u):
 
 
 @njit(cache=True, nogil=True, fastmath=_HOT, inline="always")
-def _tangent_rates(t, u, c, l, start, a, previous, dn, out):
+def _tangent_rates(t, u, c, l, e, start, a, previous, dn, out):
     """The variational equation of eqs. 21 at an RK4 stage: ``out[:, d]`` = the derivative
     of the tangent start[:, d] + a * previous[:, d] (15 rows: dp, dR row-major, dm; one
     column per direction) at the stage state ``t`` (18-tuple), whose curvature is ``u``
     and local compliance ``c`` (`_curvature_compliance`); ``l`` the row's scaled
-    body-frame distributed moment (None on the plain rod). dn (3, D) is constant along
-    the rod: the distributed force does not depend on the state. Directions are columns
-    so the loop runs over contiguous memory."""
+    body-frame distributed moment and ``e`` its strain compliance (both None on the plain
+    rod). dn (3, D) is constant along the rod: the distributed force does not depend on
+    the state. Directions are columns so the loop runs over contiguous memory."""
     (px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, nx, ny, nz, gx, gy, gz) = t
     ux, uy, uz = u
+    vx, vy, vz, tx, ty, tz = _strain(e, r00, r01, r02, r10, r11, r12, r20, r21, r22, nx, ny, nz)
     for d in range(start.shape[1]):
         d00 = start[3, d] + a * previous[3, d]
         d01 = start[4, d] + a * previous[4, d]
@@ -267,10 +298,21 @@ def _tangent_rates(t, u, c, l, start, a, previous, dn, out):
         dux = c[0] * dbx + c[1] * dby
         duy = c[2] * dbx + c[3] * dby
         duz = c[4] * dbz
-        # dp' = dR e3.
-        out[0, d] = d02
-        out[1, d] = d12
-        out[2, d] = d22
+        # dp' = dR v + R dv, dv = C_se (dR^T n + R^T dn); dR e3 on the plain rod.
+        dtx = d02
+        dty = d12
+        dtz = d22
+        if e is not None:
+            ex, ey, ez = e
+            dvx = ex * (d00 * nx + d10 * ny + d20 * nz + r00 * dnx + r10 * dny + r20 * dnz)
+            dvy = ey * (d01 * nx + d11 * ny + d21 * nz + r01 * dnx + r11 * dny + r21 * dnz)
+            dvz = ez * (d02 * nx + d12 * ny + d22 * nz + r02 * dnx + r12 * dny + r22 * dnz)
+            dtx = d00 * vx + d01 * vy + d02 * vz + r00 * dvx + r01 * dvy + r02 * dvz
+            dty = d10 * vx + d11 * vy + d12 * vz + r10 * dvx + r11 * dvy + r12 * dvz
+            dtz = d20 * vx + d21 * vy + d22 * vz + r20 * dvx + r21 * dvy + r22 * dvz
+        out[0, d] = dtx
+        out[1, d] = dty
+        out[2, d] = dtz
         # dR' = dR hat(u) + R hat(du).
         out[3, d] = d01 * uz - d02 * uy + r01 * duz - r02 * duy
         out[4, d] = d02 * ux - d00 * uz + r02 * dux - r00 * duz
@@ -282,9 +324,9 @@ def _tangent_rates(t, u, c, l, start, a, previous, dn, out):
         out[10, d] = d22 * ux - d20 * uz + r22 * dux - r20 * duz
         out[11, d] = d20 * uy - d21 * ux + r20 * duy - r21 * dux
         # dm' = -(dp' x n + p' x dn) - dR l.
-        out[12, d] = -(d12 * nz - d22 * ny + r12 * dnz - r22 * dny)
-        out[13, d] = -(d22 * nx - d02 * nz + r22 * dnx - r02 * dnz)
-        out[14, d] = -(d02 * ny - d12 * nx + r02 * dny - r12 * dnx)
+        out[12, d] = -(dty * nz - dtz * ny + ty * dnz - tz * dny)
+        out[13, d] = -(dtz * nx - dtx * nz + tz * dnx - tx * dnz)
+        out[14, d] = -(dtx * ny - dty * nx + tx * dny - ty * dnx)
         if l is not None:
             lx, ly, lz = l
             out[12, d] -= d00 * lx + d01 * ly + d02 * lz
@@ -500,14 +542,17 @@ def _integrate_cosserat_tangent(steps, profile, load_scale, beta, y, tangents, d
         row = 2 * step + 2
         new, t2, t3, t4, u1, u2, u3, u4 = _rk4_stages(state, h, profile, row, load_scale, beta)
         middle = _moment_load(profile, row - 1, load_scale, beta)
+        middle_strain = _strain_compliance(profile, row - 1, beta)
         _tangent_rates(state, u1, _curvature_compliance(profile, row, load_scale, beta, u1),
-                       _moment_load(profile, row, load_scale, beta), tangents, 0.0, tangents, dn, k1)
+                       _moment_load(profile, row, load_scale, beta), _strain_compliance(profile, row, beta),
+                       tangents, 0.0, tangents, dn, k1)
         _tangent_rates(t2, u2, _curvature_compliance(profile, row - 1, load_scale, beta, u2), middle,
-                       tangents, half, k1, dn, k2)
+                       middle_strain, tangents, half, k1, dn, k2)
         _tangent_rates(t3, u3, _curvature_compliance(profile, row - 1, load_scale, beta, u3), middle,
-                       tangents, half, k2, dn, k3)
+                       middle_strain, tangents, half, k2, dn, k3)
         _tangent_rates(t4, u4, _curvature_compliance(profile, row - 2, load_scale, beta, u4),
-                       _moment_load(profile, row - 2, load_scale, beta), tangents, h, k3, dn, k4)
+                       _moment_load(profile, row - 2, load_scale, beta), _strain_compliance(profile, row - 2, beta),
+                       tangents, h, k3, dn, k4)
         for k in range(15):
             for d in range(directions):
                 tangents[k, d] += sixth * (k1[k, d] + 2.0 * (k2[k, d] + k3[k, d]) + k4[k, d])
@@ -518,8 +563,8 @@ def _integrate_cosserat_tangent(steps, profile, load_scale, beta, y, tangents, d
 
 
 @njit(cache=True, nogil=True)
-def _rigid_link(y, length, profile, row_a, row_b, load_scale):
-    """Carry the state back along a rigid link (distal end -> proximal end). Its
+def _rigid_link(y, length, profile, row_a, row_b, load_scale, beta):
+    """Carry the state back along a link, rigid in bending (distal end -> proximal end). Its
     distributed load is lumped at the link's midpoint, with the profile averaged over
     rows ``row_a`` and ``row_b`` (the same row twice for a full link, whose centre is a
     sample point). Equilibrium of everything distal to the proximal end, with d the link
@@ -531,8 +576,17 @@ def _rigid_link(y, length, profile, row_a, row_b, load_scale):
     lx = scale * (profile[row_a, DISTRIBUTED_MOMENT] + profile[row_b, DISTRIBUTED_MOMENT])
     ly = scale * (profile[row_a, DISTRIBUTED_MOMENT + 1] + profile[row_b, DISTRIBUTED_MOMENT + 1])
     lz = scale * (profile[row_a, DISTRIBUTED_MOMENT + 2] + profile[row_b, DISTRIBUTED_MOMENT + 2])
-    dx, dy, dz = length * y[5], length * y[8], length * y[11]
     nbx, nby, nbz = y[12], y[13], y[14]
+    # The link shears and stretches under its mean internal force, d = length R v (the
+    # general rod; the plain one, beta None, is inextensible).
+    tx, ty, tz = y[5], y[8], y[11]
+    if beta is not None:
+        strain = (0.5 * (profile[row_a, STRAIN_COMPLIANCE] + profile[row_b, STRAIN_COMPLIANCE]),
+                  0.5 * (profile[row_a, STRAIN_COMPLIANCE + 1] + profile[row_b, STRAIN_COMPLIANCE + 1]),
+                  0.5 * (profile[row_a, STRAIN_COMPLIANCE + 2] + profile[row_b, STRAIN_COMPLIANCE + 2]))
+        _, _, _, tx, ty, tz = _strain(strain, y[3], y[4], y[5], y[6], y[7], y[8], y[9], y[10], y[11],
+                                      nbx + 0.5 * fx, nby + 0.5 * fy, nbz + 0.5 * fz)
+    dx, dy, dz = length * tx, length * ty, length * tz
     # Body-frame moment load into the base frame: R l.
     y[15] += (dy * nbz - dz * nby) + 0.5 * (dy * fz - dz * fy) + y[3] * lx + y[4] * ly + y[5] * lz
     y[16] += (dz * nbx - dx * nbz) + 0.5 * (dz * fx - dx * fz) + y[6] * lx + y[7] * ly + y[8] * lz
@@ -632,7 +686,7 @@ def _propagate_prb(joints, profile, load_scale, beta, y, work, nodes_p, nodes_r)
     relative = work
     rotation = np.empty((3, 3))
     _store_node(y, joints + 1, nodes_p, nodes_r)
-    _rigid_link(y, 0.5 * segment, profile, 2 * joints, 2 * joints - 1, load_scale)
+    _rigid_link(y, 0.5 * segment, profile, 2 * joints, 2 * joints - 1, load_scale, beta)
     for joint in range(joints - 1, -1, -1):
         _store_node(y, joint + 1, nodes_p, nodes_r)
         row = 2 * joint + 1
@@ -650,9 +704,9 @@ def _propagate_prb(joints, profile, load_scale, beta, y, work, nodes_p, nodes_r)
             for j in range(3):
                 y[3 + 3 * i + j] = rotation[i, j]
         if joint > 0:
-            _rigid_link(y, segment, profile, 2 * joint, 2 * joint, load_scale)
+            _rigid_link(y, segment, profile, 2 * joint, 2 * joint, load_scale, beta)
         else:
-            _rigid_link(y, 0.5 * segment, profile, 1, 0, load_scale)
+            _rigid_link(y, 0.5 * segment, profile, 1, 0, load_scale, beta)
     _store_node(y, 0, nodes_p, nodes_r)
 
 
@@ -1252,14 +1306,15 @@ BAD_TIP_OR_CLAMP = 2
 
 @njit(cache=True, nogil=True)
 def pack(bending_x, bending_y, torsion, intrinsic_curvature, distributed_force, distributed_moment,
-         follower_force, follower_moment, dead_force, dead_moment, dead_arm, ring_actuation, jet_gains, jets,
+         strain_compliance, follower_force, follower_moment, dead_force, dead_moment, dead_arm, ring_actuation, jet_gains, jets,
          base_compliance, base_play, previous_base_rotation, reference_stiffness, length, force_scale,
          moment_scale, profile, tip, base):
     """Fill ``profile``, ``tip`` and ``base`` (layouts above) from a rod problem's SI
     arrays, nondimensional, with the same operations as numpy on the whole arrays would
     make (the same numbers to the bit): one call instead of two dozen numpy calls on
     arrays of a few dozen numbers, which cost more than a warm solve. Returns PACKED, or
-    BAD_PROFILE (a non-finite profile entry or a non-positive stiffness) or
+    BAD_PROFILE (a non-finite profile entry, a non-positive stiffness or a negative strain
+    compliance) or
     BAD_TIP_OR_CLAMP (a non-finite tip load or clamp parameter)."""
     status = PACKED
     for row in range(profile.shape[0]):
@@ -1270,6 +1325,9 @@ def pack(bending_x, bending_y, torsion, intrinsic_curvature, distributed_force, 
             profile[row, INTRINSIC_CURVATURE + k] = intrinsic_curvature[row, k] * length
             profile[row, DISTRIBUTED_FORCE + k] = distributed_force[row, k] * length / force_scale
             profile[row, DISTRIBUTED_MOMENT + k] = distributed_moment[row, k] * length / moment_scale
+            profile[row, STRAIN_COMPLIANCE + k] = strain_compliance[row, k] * force_scale
+            if not profile[row, STRAIN_COMPLIANCE + k] >= 0.0 or not np.isfinite(profile[row, STRAIN_COMPLIANCE + k]):
+                status = BAD_PROFILE
         for column in range(COMPLIANCE):
             if not np.isfinite(profile[row, column]):
                 status = BAD_PROFILE

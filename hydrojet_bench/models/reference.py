@@ -6,8 +6,8 @@ collocation method with adaptive mesh instead of shooting with fixed-step RK4. T
 validation tests use it as the high-resolution truth and `hydrojet-bench perf` as the
 baseline the kernels are timed against.
 
-It covers what those need: any stiffness, curvature and load profiles, tip follower and
-dead loads, on a rigid clamp with a linear constitutive law. Clamp compliance and
+It covers what those need: any stiffness, curvature, strain compliance and load
+profiles, tip follower and dead loads, on a rigid clamp with a linear constitutive law. Clamp compliance and
 strain stiffening are refused rather than ignored.
 """
 
@@ -82,6 +82,7 @@ def _solve_once(problem: RodProblem, scales: np.ndarray, tolerance: float, max_n
         problem.intrinsic_curvature_in_body_1_m * length,
         problem.distributed_force_in_base_n_m * length / force_scale,
         problem.distributed_moment_in_body_nm_m * length / moment_scale,
+        problem.strain_compliance_in_body_1_n * force_scale,
     ])
     follower_force = (problem.actuation_matrix() @ problem.jet_forces_n + problem.tip_follower_force_in_tip_n) / force_scale
     follower_moment = problem.tip_follower_moment_in_tip_nm / moment_scale
@@ -95,7 +96,10 @@ def _solve_once(problem: RodProblem, scales: np.ndarray, tolerance: float, max_n
         moment_body = np.einsum("kji,kj->ki", rotation, y[15:18].T)
         curvature = values[:, 3:6] + moment_body / values[:, 0:3]
         d_rotation = np.cross(rotation, curvature[:, None, :])  # row i of R hat(u) is R_i x u
-        tangent = rotation[:, :, 2]
+        # p' = R v with the section's strain v = e3 + C R^T n.
+        strain = values[:, 12:15] * np.einsum("kji,kj->ki", rotation, y[12:15].T)
+        strain[:, 2] += 1.0
+        tangent = np.einsum("kij,kj->ki", rotation, strain)
         d_moment = -np.cross(tangent, y[12:15].T) - np.einsum("kij,kj->ki", rotation, values[:, 9:12])
         return np.vstack([tangent.T, d_rotation.reshape(-1, 9).T, -values[:, 6:9].T, d_moment.T])
 

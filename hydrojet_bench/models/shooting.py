@@ -1,7 +1,8 @@
 """The two kinematic models of the paper, solved by shooting from the tip.
 
 `CosseratModel` is the Kirchhoff-Cosserat rod of eqs. 17-23 (inextensible and
-unshearable, v = e3), integrated with fixed-step RK4. `PrbModel` is the pseudo-rigid-body
+unshearable, v = e3, unless an effect gives the section a strain compliance: then
+v = e3 + C n_body, the Reissner rod), integrated with fixed-step RK4. `PrbModel` is the pseudo-rigid-body
 chain of eqs. 6-16: n + 1 rigid links and n spherical joints whose stiffness follows
 eq. 10 with the linear E profile. Both compose the same effects through `RodProblem`, and
 both return a `Solution` with the backbone and the tip pose in the base frame. The
@@ -328,6 +329,8 @@ class ShootingModel:
         base = np.empty(kernels.BASE_SIZE)
         distributed_moment = _floats(problem.distributed_moment_in_body_nm_m, (samples, 3),
                                      "distributed_moment_in_body_nm_m")
+        strain_compliance = _floats(problem.strain_compliance_in_body_1_n, (samples, 3),
+                                    "strain_compliance_in_body_1_n")
         status = kernels.pack(
             _floats(problem.bending_stiffness_x_nm2, (samples,), "bending_stiffness_x_nm2"),
             _floats(problem.bending_stiffness_y_nm2, (samples,), "bending_stiffness_y_nm2"),
@@ -335,6 +338,7 @@ class ShootingModel:
             _floats(problem.intrinsic_curvature_in_body_1_m, (samples, 3), "intrinsic_curvature_in_body_1_m"),
             _floats(problem.distributed_force_in_base_n_m, (samples, 3), "distributed_force_in_base_n_m"),
             distributed_moment,
+            strain_compliance,
             _floats(problem.tip_follower_force_in_tip_n, (3,), "tip_follower_force_in_tip_n"),
             _floats(problem.tip_follower_moment_in_tip_nm, (3,), "tip_follower_moment_in_tip_nm"),
             _floats(problem.tip_dead_force_in_base_n, (3,), "tip_dead_force_in_base_n"),
@@ -347,11 +351,12 @@ class ShootingModel:
             _floats(problem.previous_base_rotation_vector_rad, (3,), "previous_base_rotation_vector_rad"),
             reference_stiffness, length, force_scale, moment_scale, profile, tip, base)
         if status == kernels.BAD_PROFILE:
-            raise ValueError("effects produced a non-finite profile or a non-positive stiffness")
+            raise ValueError("effects produced a non-finite profile, a non-positive stiffness or a negative "
+                             "strain compliance")
         if status == kernels.BAD_TIP_OR_CLAMP:
             raise ValueError("effects produced a non-finite tip load or clamp parameter")
         # None selects the kernels' plain-rod specialisation (see `kernels`).
-        plain = problem.cubic_stiffening_m2 == 0.0 and not distributed_moment.any()
+        plain = problem.cubic_stiffening_m2 == 0.0 and not distributed_moment.any() and not strain_compliance.any()
         beta = None if plain else problem.cubic_stiffening_m2 / length**2
         return PreparedProblem(problem, profile, tip, base, beta,
                                length, force_scale, moment_scale, self.node_arc_length_m(length),

@@ -1,7 +1,8 @@
 """The forward-mode tangent of the Cosserat shot against central differences of the shot
 itself, on problems that switch on every term the variational equations carry: cubic
 (softening and stiffening) elasticity, intrinsic curvature, distributed force and
-moment, dead tip loads off the tip point, a compliant clamp with and without play."""
+moment, a section that shears and stretches, dead tip loads off the tip point, a
+compliant clamp with and without play."""
 
 from __future__ import annotations
 
@@ -15,8 +16,9 @@ ACROSS = ModelParameters(gravity_in_base_m_s2=(-9.81, 0.0, 0.0))
 RESOLUTION = 20
 
 
-def _problem(seed: int, beta: float, compliance: float, play: float):
-    """A packed problem with random extra terms written straight into the kernel arrays."""
+def _problem(seed: int, beta: float, compliance: float, play: float, strain: float = 0.0):
+    """A packed problem with random extra terms written straight into the kernel arrays;
+    ``strain`` the largest (nondimensional) strain compliance, 0: an inextensible rod."""
     rng = np.random.default_rng(seed)
     model = CosseratModel(resolution=RESOLUTION)
     prepared = model.prepare(rng.uniform(0.0, 0.1, 3), ACROSS)
@@ -25,6 +27,7 @@ def _problem(seed: int, beta: float, compliance: float, play: float):
     profile[:, kernels.INTRINSIC_CURVATURE:kernels.INTRINSIC_CURVATURE + 3] = rng.normal(0.0, 0.3, 3)
     profile[:, kernels.DISTRIBUTED_FORCE:kernels.DISTRIBUTED_FORCE + 3] += rng.normal(0.0, 0.2, (rows, 3))
     profile[:, kernels.DISTRIBUTED_MOMENT:kernels.DISTRIBUTED_MOMENT + 3] = rng.normal(0.0, 0.2, (rows, 3))
+    profile[:, kernels.STRAIN_COMPLIANCE:kernels.STRAIN_COMPLIANCE + 3] = rng.uniform(0.0, strain, (rows, 3))
     tip = prepared.tip.copy()
     tip[kernels.TIP_FOLLOWER_MOMENT:kernels.TIP_FOLLOWER_MOMENT + 3] = rng.normal(0.0, 0.3, 3)
     tip[kernels.TIP_DEAD_MOMENT:kernels.TIP_DEAD_MOMENT + 3] = rng.normal(0.0, 0.3, 3)
@@ -45,11 +48,11 @@ def _shot(x, reference, profile, tip, base, beta):
     return residual
 
 
-@pytest.mark.parametrize(("seed", "beta", "compliance", "play"), [
-    (1, 0.0, 0.0, 0.0), (2, 0.3, 0.0, 0.0), (3, -0.01, 0.0, 0.0), (4, 0.0, 0.2, 0.0), (5, 0.2, 0.3, 0.01),
-    (6, 0.0, 0.5, 0.05)])
-def test_the_tangent_jacobian_is_the_derivative_of_the_discrete_shot(seed, beta, compliance, play):
-    profile, tip, base, beta, reference = _problem(seed, beta, compliance, play)
+@pytest.mark.parametrize(("seed", "beta", "compliance", "play", "strain"), [
+    (1, 0.0, 0.0, 0.0, 0.0), (2, 0.3, 0.0, 0.0, 0.0), (3, -0.01, 0.0, 0.0, 0.0), (4, 0.0, 0.2, 0.0, 0.0),
+    (5, 0.2, 0.3, 0.01, 0.0), (6, 0.0, 0.5, 0.05, 0.0), (7, 0.0, 0.0, 0.0, 0.2), (8, 0.2, 0.3, 0.01, 0.1)])
+def test_the_tangent_jacobian_is_the_derivative_of_the_discrete_shot(seed, beta, compliance, play, strain):
+    profile, tip, base, beta, reference = _problem(seed, beta, compliance, play, strain)
     x = np.random.default_rng(seed + 100).normal(0.0, 0.05, 3)
     residual, jacobian = np.empty(3), np.empty((3, 3))
     nodes_p, nodes_r = np.empty((RESOLUTION + 1, 3)), np.empty((RESOLUTION + 1, 3, 3))
@@ -100,7 +103,7 @@ def test_the_plain_rod_kernel_is_the_general_kernel_without_its_terms(seed):
         np.testing.assert_allclose(plain, general, rtol=1e-12, atol=1e-14)
 
 
-def test_a_prepared_problem_takes_the_plain_kernel_only_without_cubic_law_and_distributed_moment():
+def test_a_prepared_problem_takes_the_plain_kernel_only_without_cubic_law_distributed_moment_and_strain():
     model = CosseratModel(resolution=RESOLUTION)
     jets = np.array([0.05, 0.0, 0.0])
     assert model.prepare(jets, ACROSS).beta is None
@@ -110,6 +113,9 @@ def test_a_prepared_problem_takes_the_plain_kernel_only_without_cubic_law_and_di
     problem = model.build_problem(jets, ACROSS)
     problem.cubic_stiffening_m2 = 1e-6
     assert model._pack(problem).beta == pytest.approx(1e-6 / ACROSS.rod.length_m ** 2)
+    problem = model.build_problem(jets, ACROSS)
+    problem.strain_compliance_in_body_1_n[:, 2] = 0.05
+    assert model._pack(problem).beta == 0.0
 
 
 def _packed_by_numpy(problem, length, force_scale, moment_scale, reference_stiffness):
@@ -124,7 +130,9 @@ def _packed_by_numpy(problem, length, force_scale, moment_scale, reference_stiff
         problem.distributed_force_in_base_n_m * length / force_scale)
     profile[:, kernels.DISTRIBUTED_MOMENT:kernels.DISTRIBUTED_MOMENT + 3] = (
         problem.distributed_moment_in_body_nm_m * length / moment_scale)
-    profile[:, kernels.COMPLIANCE:] = 1.0 / profile[:, kernels.STIFFNESS:kernels.STIFFNESS + 3]
+    profile[:, kernels.COMPLIANCE:kernels.COMPLIANCE + 3] = 1.0 / profile[:, kernels.STIFFNESS:kernels.STIFFNESS + 3]
+    profile[:, kernels.STRAIN_COMPLIANCE:kernels.STRAIN_COMPLIANCE + 3] = (
+        problem.strain_compliance_in_body_1_n * force_scale)
     tip = np.concatenate([problem.tip_follower_force_in_tip_n / force_scale,
                           problem.tip_follower_moment_in_tip_nm / moment_scale,
                           problem.tip_dead_force_in_base_n / force_scale,
@@ -174,6 +182,8 @@ def test_a_problem_field_of_the_wrong_shape_is_refused_by_name_and_a_scalar_is_b
     ("intrinsic_curvature_in_body_1_m", np.nan, "non-finite profile"),
     ("tip_dead_force_in_base_n", np.inf, "non-finite tip load"),
     ("base_play_rad", np.nan, "clamp parameter"),
+    ("strain_compliance_in_body_1_n", -1e-3, "negative strain compliance"),
+    ("strain_compliance_in_body_1_n", np.inf, "non-finite profile"),
 ])
 def test_a_non_finite_or_non_positive_packing_is_refused(field, value, message):
     model = CosseratModel(resolution=RESOLUTION)

@@ -63,6 +63,34 @@ def test_small_dead_tip_load_matches_euler_bernoulli(model):
     assert slope == pytest.approx(force * L**2 / (2 * EI), rel=1e-4)
 
 
+@pytest.mark.parametrize("model", [CosseratModel(effects=("shear_extension",)),
+                                   PrbModel(effects=("shear_extension",), links=200)], ids=["cosserat", "prb-200"])
+def test_a_shearing_stretching_rod_bends_and_stretches_as_timoshenko_says(model):
+    # A small dead tip load across a uniform rod: Timoshenko's cantilever, bending plus
+    # shear, P L^3 / (3 E I) + P L / (k G A); along it, the rod stretches by P L / (E A).
+    # Same size argument as Euler-Bernoulli above (alpha = 1e-3); scale 4 makes the shear
+    # 4 % of the deflection, so a missing or doubled term fails by 400 times the 1e-4.
+    from hydrojet_bench.effects.shear_extension import cowper_shear_coefficient
+
+    scale = 4.0
+    params = ModelParameters(rod=UNIFORM_ROD, gravity_in_base_m_s2=(0.0, 0.0, 0.0),
+                                  effect_values={"shear_extension.scale": scale})
+    force = 1e-3 * EI / L**2
+    area = UNIFORM_ROD.area_m2
+    shear_stiffness = (cowper_shear_coefficient(UNIFORM_ROD.poisson_ratio)
+                       * UNIFORM_ROD.shear_modulus_pa(0.0) * area / scale)
+    axial_stiffness = UNIFORM_ROD.youngs_modulus_base_pa * area / scale
+    kind = {"links": 200} if isinstance(model, PrbModel) else {}
+    across = type(model)(effects=("shear_extension", TipDeadForce((force, 0.0, 0.0))), **kind)
+    deflection = across.solve([0.0, 0.0, 0.0], params).tip_position_in_base_m[0]
+    shear_part = force * L / shear_stiffness
+    assert shear_part > 0.03 * deflection
+    assert deflection == pytest.approx(force * L**3 / (3 * EI) + shear_part, rel=1e-4)
+    along = type(model)(effects=("shear_extension", TipDeadForce((0.0, 0.0, 100 * force))), **kind)
+    stretch = along.solve([0.0, 0.0, 0.0], params).tip_position_in_base_m[2] - L
+    assert stretch == pytest.approx(100 * force * L / axial_stiffness, rel=1e-6)
+
+
 def test_small_self_weight_sag_matches_euler_bernoulli():
     # A cantilever under its own weight w per length, gravity across the rod:
     # tip deflection w L^4 / (8 EI), tip slope w L^3 / (6 EI). The rod's density is scaled
@@ -200,6 +228,24 @@ def test_linear_modulus_with_gravity_matches_independent_collocation(jets):
                               gravity_in_base_m_s2=(-9.81, 0.0, 0.0))
     other = model.solve(jets, uniform)
     assert np.linalg.norm(other.tip_position_in_base_m - solution.tip_position_in_base_m) > 1e-4
+
+
+@pytest.mark.parametrize("jets", [[0.05, 0.0, 0.0], [0.0, 0.1, 0.04]])
+def test_a_shearing_stretching_rod_matches_independent_collocation(jets):
+    # The HydroJet rod three times as compliant in shear and extension as a solid
+    # section, gravity across: the kernel's strain terms (and their RK4 stages) against
+    # solve_bvp's own right-hand side. Tolerances as for the inextensible rod above.
+    params = ModelParameters(gravity_in_base_m_s2=(-9.81, 0.0, 0.0), effect_values={"shear_extension.scale": 3.0})
+    model = CosseratModel(effects=("gravity", "shear_extension"))
+    solution = model.solve(jets, params)
+    mesh, states = solve_reference(model.build_problem(jets, params))
+    np.testing.assert_allclose(solution.tip_position_in_base_m, states[0:3, -1], atol=2e-6)
+    np.testing.assert_allclose(solution.tip_rotation_in_base, states[3:12, -1].reshape(3, 3), atol=1e-4)
+    inextensible = CosseratModel().solve(jets, params)
+    assert np.linalg.norm(inextensible.tip_position_in_base_m - solution.tip_position_in_base_m) > 5e-4
+    # The PRB chain's stretched links converge to the same rod.
+    chain = PrbModel(effects=("gravity", "shear_extension")).solve(jets, params)
+    assert np.linalg.norm(chain.tip_position_in_base_m - solution.tip_position_in_base_m) < 1e-4
 
 
 # --- PRB converges to Cosserat -----------------------------------------------------------
