@@ -12,3 +12,9 @@ class UserError(Exception):
 
 class ConvergenceError(RuntimeError):
     """A model solve did not reach equilibrium; no answer is returned rather than a wrong one."""
+
+
+class EffectOutputError(UserError, ValueError):
+    """Effects left the rod problem unsolvable (a wrong shape, a non-finite value, a
+    non-positive stiffness): the user's effect file or its parameter values. A ValueError
+    too, so a fit that meets it at a trial value treats it as any failed solve."""

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .effects import LIBRARY, Effect, load_effect, qualified_parameter_names
+from .effects import LIBRARY, Effect, load_effect, load_effects, qualified_parameter_names
 from .errors import UserError
 from .estimation.calibration import DEFAULT_NAMES
 from .models import make_model
@@ -89,7 +89,7 @@ def build_model(name: str, effect_specs: Sequence[str]) -> tuple[ShootingModel, 
     """The model with gravity plus the requested effects, and the requested effects
     themselves (whose parameters a calibration fits; gravity stays at its nominal weight
     unless requested)."""
-    requested = tuple(load_effect(spec) for spec in dict.fromkeys(effect_specs))
+    requested = load_effects(effect_specs)
     always = () if any(effect.name == "gravity" for effect in requested) else (load_effect("gravity"),)
     return make_model(name, always + requested), requested
 
@@ -124,6 +124,12 @@ def model_choice(args: argparse.Namespace, defaults: ModelDefaults = COSSERAT) -
     return choose_model(args.model, args.effect, getattr(args, "params", None), defaults)
 
 
+def _same_effect_file(first: str, second: str) -> bool:
+    """Whether two path/to/file.py:Class specs name the same class of the same file."""
+    (first_path, _, first_class), (second_path, _, second_class) = first.rpartition(":"), second.rpartition(":")
+    return first_class == second_class and Path(first_path).resolve() == Path(second_path).resolve()
+
+
 def _file_effect_specs(parameter_file: ParameterFile, path: Path | str, effect_files: Sequence[str]) -> list[str]:
     """The parameter file's effects as specs: a file it names relative to itself, unless
     an effect file of the command line has the same name (the command line wins); a name
@@ -137,7 +143,13 @@ def _file_effect_specs(parameter_file: ParameterFile, path: Path | str, effect_f
                 name = load_effect(resolved).name
             except UserError as error:
                 raise UserError(f"{path}: effects: {error}") from None
-            specs.append(named_files.get(name, resolved))
+            given = named_files.get(name, resolved)
+            if not _same_effect_file(given, resolved):
+                # The command line wins over a file that moved, not over one still there:
+                # the parameters were fitted to that one's physics.
+                raise UserError(f"{path}: effect {name!r} was calibrated with {resolved}; {given} is another "
+                                "file of the same name: give the one it was calibrated with, or calibrate again")
+            specs.append(given)
             continue
         specs.append(named_files.get(spec, spec))
     for spec in specs:

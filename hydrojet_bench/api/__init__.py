@@ -29,7 +29,7 @@ from ..analysis.compare import compare_methods, compare_steps, lead_in, validati
 from ..analysis.diagnosis import DiagnosisSettings, diagnose as run_diagnosis
 from ..analysis.diagnosis.noise import repeatability_floor
 from ..bench.replay import live_difference_deg, logged_steps, read_session, replay as replay_session
-from ..effects import load_effect
+from ..effects import load_effects
 from ..errors import ConvergenceError, UserError
 from ..estimation import OnlineSettings
 from ..estimation.calibration import (DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_dataset,
@@ -130,7 +130,9 @@ def diagnose(data: Data, *, model: str | None = None, effects: Sequence[str] = (
     if workers is not None and workers < 1:
         raise UserError(f"workers must be at least 1, got {workers}")
     choice = _choice(model, effects, None)
-    tried = tuple(load_effect(spec) for spec in dict.fromkeys(candidates)) or None
+    _check_specs(candidates, "candidates")
+    load_effects([*choice.effect_specs, *candidates])  # one name, one effect: known and candidates alike
+    tried = load_effects(candidates) or None
     measurements = _measurements(data, profile)
     # Without repeated sweeps the raw samples' scatter is the only noise floor left.
     samples = (load_dataset(measurements.path, measurements.profile)
@@ -256,12 +258,20 @@ def _choice(model: str | None, effects: Sequence[str], params: Params, defaults:
             effect_files: Sequence[str] | None = None) -> ModelChoice:
     """The commands' model rule; a `CalibrateResult` brings its model and effects as its
     parameter file would (its effect files among them)."""
+    _check_specs(effects, "effects")
     if not isinstance(params, CalibrateResult):
         return choose_model(model, tuple(effects), None if params is None else Path(params), defaults,
                             effect_files=effect_files)
     files = [*params.effect_specs, *(effects if effect_files is None else effect_files)]
     return choose_model(model, tuple(effects), _source(params), defaults, effect_files=files,
                         parameter_file=params.parameter_file)
+
+
+def _check_specs(specs: Sequence[str], argument: str) -> None:
+    """A single string would be read letter by letter as effect names."""
+    if isinstance(specs, str):
+        raise UserError(f"{argument} takes a list of effect names or files, got the string {specs!r}: "
+                        f"write {argument}=[{specs!r}]")
 
 
 def _source(params: Params) -> str:

@@ -12,7 +12,7 @@ plan of the poses that tell them apart is written (never over an existing file).
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,7 +31,7 @@ from ..analysis.diagnosis.setup import SETUP, corrected_profile_text, is_setup, 
 from ..plans import DEFAULT_SETTLE_S
 from ..inputs import load_dataset
 from ..data.dataset import Dataset
-from ..effects import Effect, load_effect
+from ..effects import Effect, load_effect, load_effects
 from ..errors import ConvergenceError, UserError
 from ..estimation.calibration import ALL_ROWS
 from ..files import check_writable_target, create_numbered, make_folder_for, publish
@@ -86,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
     if args.separating_plan is not None:
         check_writable_target(args.separating_plan, "plan file", overwrite=False)
     choice = model_choice(args)  # validates --effect before the data is read
-    candidates = tuple(load_effect(spec) for spec in dict.fromkeys(args.candidate)) or None
+    load_effects([*choice.effect_specs, *args.candidate])  # one name, one effect: known and candidates alike
+    candidates = load_effects(args.candidate) or None
     if args.export is not None:
         make_folder_for(args.export)
         check_writable_target(args.export, "parameter file", overwrite=False)  # before the minutes of fitting
@@ -193,17 +194,15 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
     for candidate in diagnosis.ranking:
         style = "bold green" if candidate.effect == diagnosis.verdict else ("" if candidate.qualifies else "dim")
         if candidate.error is not None:
-            table.add_row(candidate.effect, f"{diagnosis.baseline_heldout_rmse_deg:.3f}", "-", "-", "-", "-",
-                          f"fit failed: {candidate.error}", style="dim")
+            table.add_row(render.plain(candidate.effect), f"{diagnosis.baseline_heldout_rmse_deg:.3f}", "-", "-",
+                          "-", "-", render.plain(f"fit failed: {candidate.error}"), style="dim")
             continue
-        fitted = ", ".join(f"{name.partition('.')[2]} {value:.4g} +- {error:.2g}"
-                           for name, (value, error) in candidate.parameters.items())
-        if candidate.notes:
-            fitted += " [" + "; ".join(candidate.notes) + "]"
-            style = style if candidate.converged else "dim red"
-        table.add_row(candidate.effect, f"{diagnosis.baseline_heldout_rmse_deg:.3f}",
+        if not candidate.converged:
+            style = "dim red"
+        table.add_row(render.plain(candidate.effect), f"{diagnosis.baseline_heldout_rmse_deg:.3f}",
                       f"{candidate.heldout_orientation_rmse_deg:.3f}", f"{candidate.explained_fraction:.0%}",
-                      f"{candidate.score_change:+.1f}", f"{candidate.online_correlation:+.2f}", fitted, style=style)
+                      f"{candidate.score_change:+.1f}", f"{candidate.online_correlation:+.2f}",
+                      _fitted_text(candidate.parameters, candidate.notes), style=style)
     console.print(table)
     _print_setup(console, diagnosis)
     gap = diagnosis.baseline_hysteresis_gap_deg
@@ -223,11 +222,9 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
         title, style = "verdict: " + " + ".join(found.effect for found in diagnosis.found), "green"
     lines = [diagnosis.explanation, "", "Evidence: " + "; ".join(evidence) + "."]
     for found in diagnosis.found:
-        fitted = ", ".join(f"{name.partition('.')[2]} {value:.4g} +- {error:.2g}"
-                           for name, (value, error) in found.parameters.items())
-        notes = f" [{'; '.join(found.notes)}]" if found.notes else ""
         lines.append(f"{found.effect}: {found.share_of_excess:.0%} of the excess, held-out error "
-                     f"{found.heldout_orientation_rmse_deg:.3f} deg with it ({fitted}){notes}")
+                     f"{found.heldout_orientation_rmse_deg:.3f} deg with it ("
+                     f"{_fitted_text(found.parameters, found.notes, markup=False)})")
     for stage in (diagnosis, *diagnosis.stages):
         if stage.alternatives:
             lines.append(f"{stage.verdict} explains the held-out data no better than {', '.join(stage.alternatives)} "
@@ -235,7 +232,20 @@ def print_diagnosis(console: Console, diagnosis: Diagnosis, args: argparse.Names
     if diagnosis.final.remaining_excess and diagnosis.found:
         lines.append(_remaining_excess(diagnosis.found[-1]))
     # On a pipe the console is as wide as a table may need: the box fits its text there.
-    console.print(Panel("\n".join(lines), title=title, border_style=style, expand=console.is_terminal))
+    # Plain text: effect names, explanations and notes ("[not converged]") are not markup.
+    console.print(Panel(render.plain("\n".join(lines)), title=render.plain(title), border_style=style,
+                        expand=console.is_terminal))
+
+
+def _fitted_text(parameters: Mapping[str, tuple[float, float]], notes: Sequence[str], *, markup: bool = True) -> str:
+    """``name value +- error, ...`` and the fit's notes in brackets (on its bound, not
+    converged); made inert for rich markup unless ``markup`` is False (text a caller escapes
+    as a whole)."""
+    text = ", ".join(f"{name.partition('.')[2]} {value:.4g} +- {error:.2g}"
+                     for name, (value, error) in parameters.items())
+    if notes:
+        text += " [" + "; ".join(notes) + "]"
+    return render.plain(text) if markup else text
 
 
 # A PRB fit on twice the links that leaves at most this share of the held-out error is
@@ -411,10 +421,9 @@ def _print_setup(console: Console, diagnosis: Diagnosis) -> None:
     for candidate in diagnosis.setup_ranking:
         style = "bold magenta" if candidate.effect == diagnosis.verdict else ("" if candidate.qualifies else "dim")
         if candidate.error is not None:
-            table.add_row(candidate.effect, "-", "-", "-", f"fit failed: {candidate.error}", style="dim")
+            table.add_row(candidate.effect, "-", "-", "-", render.plain(f"fit failed: {candidate.error}"), style="dim")
             continue
-        fitted = ", ".join(f"{name.partition('.')[2]} {value:.4g} +- {error:.2g}"
-                           for name, (value, error) in candidate.parameters.items())
         table.add_row(candidate.effect, f"{candidate.heldout_orientation_rmse_deg:.3f}",
-                      f"{candidate.explained_fraction:.0%}", f"{candidate.score_change:+.1f}", fitted, style=style)
+                      f"{candidate.explained_fraction:.0%}", f"{candidate.score_change:+.1f}",
+                      _fitted_text(candidate.parameters, candidate.notes), style=style)
     console.print(table)

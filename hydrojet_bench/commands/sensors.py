@@ -196,7 +196,8 @@ def print_agreement(console: Console, agreement: SensorAgreement, log: Path) -> 
     console.print(table)
 
     if not agreement.holds:
-        console.print(f"no static hold (a command held >= {agreement.min_hold_s:g} s); see --min-hold")
+        console.print(f"no static hold (a command held >= {agreement.min_hold_s:g} s, with samples after its first "
+                      f"{agreement.settle_s:g} s); see --min-hold and --settle", highlight=False)
         return
     table = render.table("Static accuracy: settled part of each hold", labels=("hold", "q (mN)"),
                          numbers=("n", "mean", "SD", "bias", "heading", "tilt", "trend"),

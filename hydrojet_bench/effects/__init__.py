@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import inspect
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 from ..errors import UserError
@@ -36,7 +37,7 @@ LIBRARY: dict[str, type] = {
 }
 
 __all__ = ["CALIBRATION_POSES", "Effect", "EffectParameter", "LIBRARY", "SWEEPS", "effect_values",
-           "identifying_rows", "load_effect", "qualified_parameter_names"]
+           "identifying_rows", "load_effect", "load_effects", "qualified_parameter_names"]
 
 
 def load_effect(spec: str) -> Effect:
@@ -68,7 +69,29 @@ def load_effect(spec: str) -> Effect:
         effect = cls()
     except (Exception, SystemExit) as error:
         raise UserError(f"effect {origin}: {class_name}() failed: {_describe(error)}") from None
-    return checked_effect(effect, origin, LIBRARY)
+    return checked_effect(effect, origin, _reserved_names())
+
+
+def _reserved_names() -> dict[str, object]:
+    """Names a user's effect may not take: the library's and the setup hypotheses' (which
+    diagnose fits beside the candidates, by name)."""
+    from .setup import setup_effects
+
+    return {**LIBRARY, **{effect.name: effect for effect in setup_effects()}}
+
+
+def load_effects(specs: Sequence[str]) -> tuple[Effect, ...]:
+    """`load_effect` of each spec, once each; two specs whose effects share a name (two
+    files, one class name) are refused: the name is how fits, tables and parameter files
+    tell effects apart."""
+    effects: dict[str, tuple[str, Effect]] = {}
+    for spec in dict.fromkeys(specs):
+        effect = load_effect(spec)
+        if effect.name in effects:
+            raise UserError(f"effects {effects[effect.name][0]} and {spec} are both named {effect.name!r}; "
+                            "give each class its own name")
+        effects[effect.name] = (spec, effect)
+    return tuple(effect for _, effect in effects.values())
 
 
 def _describe(error: BaseException) -> str:

@@ -87,7 +87,8 @@ def checked_effect(effect: object, origin: str, reserved_names: Mapping[str, obj
     if not isinstance(name, str) or not name.isidentifier():
         raise UserError(f"effect {origin}: name must be an identifier such as 'my_effect', got {name!r}")
     if name in reserved_names:
-        raise UserError(f"effect {origin}: name {name!r} is a library effect's; give the class its own name")
+        raise UserError(f"effect {origin}: name {name!r} is a library effect's or a setup hypothesis's; give the "
+                        "class its own name")
     parameters = effect.parameters  # type: ignore[attr-defined]
     if not isinstance(parameters, (tuple, list)) or not all(isinstance(p, EffectParameter) for p in parameters):
         raise UserError(f"effect {origin}: parameters must be a tuple of EffectParameter, got {parameters!r}")
@@ -107,6 +108,19 @@ def checked_effect(effect: object, origin: str, reserved_names: Mapping[str, obj
     nominal = ModelParameters()
     defaults = effect_values(checked, nominal)
     plain = [_trial(checked, nominal, forces, defaults) for forces in _TRIAL_FORCES_N]
+    if not parameters and all(_same(trial, _nominal_trial(nominal, forces))
+                              for trial, forces in zip(plain, _TRIAL_FORCES_N)):
+        # Nothing to fit and nothing changed: a calibration "with" it is the one without.
+        raise UserError(f"effect {origin}: it has no parameters and apply changes nothing in the problem")
+    if not effect.uses_actuation:  # type: ignore[attr-defined]
+        # A model packs a problem once and reuses it for other jet forces unless an effect
+        # reads them: one that does, unflagged, would be solved with stale jets.
+        for values in (defaults, *({**defaults, p.name: p.upper if p.upper != p.default else p.lower}
+                                   for p in parameters)):
+            trials = plain if values is defaults else _trials_or_none(checked, nominal, values)
+            if trials is not None and not all(_same(trials[0], trial, but="jet_forces_n") for trial in trials[1:]):
+                raise UserError(f"effect {origin}: apply changes the problem with the jet forces but "
+                                "uses_actuation is False; set uses_actuation = True")
     for parameter in parameters:
         # A parameter apply never reads (a misspelt key read with .get, a value written to
         # a local) would be calibrated to noise and reported as if it were physics.
@@ -121,10 +135,14 @@ def checked_effect(effect: object, origin: str, reserved_names: Mapping[str, obj
     return checked
 
 
+def _nominal_trial(params: ModelParameters, jet_forces_n: np.ndarray) -> RodProblem:
+    return RodProblem.nominal(params, jet_forces_n, np.linspace(0.0, params.rod.length_m, _TRIAL_SAMPLES))
+
+
 def _trial(effect: CheckedEffect, params: ModelParameters, jet_forces_n: np.ndarray,
            values: Mapping[str, float]) -> RodProblem:
     """The nominal rod's problem at ``jet_forces_n`` with ``effect`` applied at ``values``."""
-    problem = RodProblem.nominal(params, jet_forces_n, np.linspace(0.0, params.rod.length_m, _TRIAL_SAMPLES))
+    problem = _nominal_trial(params, jet_forces_n)
     effect.apply(problem, values)
     return problem
 
@@ -140,10 +158,22 @@ def _differs(effect: CheckedEffect, params: ModelParameters, jet_forces_n: np.nd
         return True
 
 
-def _same(first: RodProblem, second: RodProblem) -> bool:
+def _trials_or_none(effect: CheckedEffect, params: ModelParameters,
+                    values: Mapping[str, float]) -> list[RodProblem] | None:
+    """The trial problems at every trial jet force, or None where apply fails at
+    ``values`` (reported when a solve meets it, as in `_differs`)."""
+    try:
+        return [_trial(effect, params, forces, values) for forces in _TRIAL_FORCES_N]
+    except UserError:
+        return None
+
+
+def _same(first: RodProblem, second: RodProblem, but: str = "") -> bool:
+    """Whether two problems hold the same values in every field (``but`` one)."""
     return all(np.array_equal(getattr(first, item.name), getattr(second, item.name))
                if isinstance(getattr(first, item.name), np.ndarray)
-               else getattr(first, item.name) == getattr(second, item.name) for item in fields(first))
+               else getattr(first, item.name) == getattr(second, item.name)
+               for item in fields(first) if item.name != but)
 
 
 def _signature(function: object) -> str:

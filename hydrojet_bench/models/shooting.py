@@ -29,7 +29,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..effects import Effect, effect_values, load_effect
-from ..errors import ConvergenceError
+from ..errors import ConvergenceError, EffectOutputError
 from ..geometry import quat_from_matrix, se3, so3_log
 from ..params import ModelParameters, actuation_matrix
 from . import kernels
@@ -318,6 +318,12 @@ class ShootingModel:
         return not self._uses_actuation and not prepared.problem.depends_on_previous_state
 
     def _pack(self, problem: RodProblem) -> PreparedProblem:
+        try:
+            return self._pack_checked(problem)
+        except EffectOutputError as error:
+            raise EffectOutputError(f"{error} (effects: {', '.join(getattr(e, 'origin', e.name) for e in self.effects)})") from None
+
+    def _pack_checked(self, problem: RodProblem) -> PreparedProblem:
         params = problem.params
         length = params.rod.length_m
         reference_stiffness = params.rod.youngs_modulus_base_pa * params.rod.second_moment_m4
@@ -351,10 +357,10 @@ class ShootingModel:
             _floats(problem.previous_base_rotation_vector_rad, (3,), "previous_base_rotation_vector_rad"),
             reference_stiffness, length, force_scale, moment_scale, profile, tip, base)
         if status == kernels.BAD_PROFILE:
-            raise ValueError("effects produced a non-finite profile, a non-positive stiffness or a negative "
-                             "strain compliance")
+            raise EffectOutputError("effects produced a non-finite profile, a non-positive stiffness or a negative "
+                                    "strain compliance")
         if status == kernels.BAD_TIP_OR_CLAMP:
-            raise ValueError("effects produced a non-finite tip load or clamp parameter")
+            raise EffectOutputError("effects produced a non-finite tip load or clamp parameter")
         # None selects the kernels' plain-rod specialisation (see `kernels`).
         plain = problem.cubic_stiffening_m2 == 0.0 and not distributed_moment.any() and not strain_compliance.any()
         beta = None if plain else problem.cubic_stiffening_m2 / length**2
@@ -694,8 +700,8 @@ def _floats(values, shape: tuple[int, ...], field_name: str) -> np.ndarray:
         try:
             array = np.ascontiguousarray(np.broadcast_to(array, shape))
         except ValueError:
-            raise ValueError(f"effects left RodProblem.{field_name} with shape {array.shape}, "
-                             f"expected {shape}") from None
+            raise EffectOutputError(f"effects left RodProblem.{field_name} with shape {array.shape}, "
+                                    f"expected {shape}") from None
     return array
 
 

@@ -134,23 +134,46 @@ def test_steps_whose_tip_still_turned_are_warned_in_the_output_and_the_json(hyst
     assert json.loads((tmp_path / "c.json").read_text())["unsettled_steps"] == expected
 
 
-def test_a_value_pushed_onto_its_bound_is_warned_written_and_exits_3(tmp_path, capsys):
-    """A jet 60 % stronger than nominal, fitted with gains that may reach 1.5: the file is
-    written, but the command says the value sits on its bound and exits 3, not 0."""
+def test_a_value_pushed_onto_its_bound_is_refitted_to_its_limits_or_warned_written_and_exits_3(tmp_path, capsys):
+    """A jet 60 % stronger than nominal. Fitted with the library's gains (searched to 1.5,
+    physically up to 3), the fit ends on the search bound and is refitted with the search
+    widened, as diagnose fits its candidates: exit 0, the gain found. Fitted with a gain
+    whose search bound is its physical limit, the file is written, but the command says
+    the value sits on its bound and exits 3, not 0."""
     profile = load_profile("sim")
     twin = DigitalTwin(TwinConfig.from_profile(profile, hidden_effects=("jet_gain",), seed=3,
                                                hidden_effect_values=(("jet_gain.gain_2", 1.6),)))
     table = tmp_path / "strong.csv"
     write_csv(twin.run_plan(calibration_plan(20, seed=3), record_window_s=1.0).to_dataset(profile, "strong jet"),
               table)
+    widened = tmp_path / "widened.toml"
+    assert main(["calibrate", str(table), "--effect", "jet_gain", "-o", str(widened)]) == 0
+    printed = " ".join(capsys.readouterr().out.split())
+    assert "jet_gain.gain_2 ended on its search bound: refitted with the search widened" in printed
+    content = read_parameter_file(widened)
+    assert content.parameters["jet_gain.gain_2"] == pytest.approx(1.6, abs=0.05)
+    assert content.calibration["converged"] is True and "at_bound" not in content.calibration
+
+    capped = tmp_path / "capped_gain.py"
+    capped.write_text(
+        "import numpy as np\n"
+        "from hydrojet_bench.effects import EffectParameter\n"
+        "class CappedGain:\n"
+        "    name = 'capped_gain'\n"
+        "    explanation = 'jet 2 stronger or weaker, at most 1.5 times'\n"
+        "    parameters = (EffectParameter('gain_2', 1.0, 0.0, 1.5, '1', 'jet 2 force scale'),)\n"
+        "    uses_actuation = False\n"
+        "    def apply(self, problem, values):\n"
+        "        problem.jet_gains = problem.jet_gains * np.array([1.0, values['gain_2'], 1.0])\n")
     output, document = tmp_path / "p.toml", tmp_path / "p.json"
-    assert main(["calibrate", str(table), "--effect", "jet_gain", "-o", str(output), "--json", str(document)]) == 3
+    assert main(["calibrate", str(table), "--effect", f"{capped}:CappedGain", "-o", str(output),
+                 "--json", str(document)]) == 3
     printed = capsys.readouterr()
-    warning = "warning: jet_gain.gain_2 = 1.5 sits on its bound (0 to 1.5)"
+    warning = "warning: capped_gain.gain_2 = 1.5 sits on its bound (0 to 1.5)"
     assert warning in " ".join(printed.err.split()) and warning not in " ".join(printed.out.split())
     content = read_parameter_file(output)
-    assert content.calibration["at_bound"] == ["jet_gain.gain_2"]
-    assert json.loads(document.read_text())["calibration"]["at_bound"] == ["jet_gain.gain_2"]
+    assert content.calibration["at_bound"] == ["capped_gain.gain_2"]
+    assert json.loads(document.read_text())["calibration"]["at_bound"] == ["capped_gain.gain_2"]
 
 
 def test_a_converged_fit_says_so_in_the_file(hysteretic, tmp_path):

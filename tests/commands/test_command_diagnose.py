@@ -164,3 +164,27 @@ def test_a_setup_verdict_tied_with_physics_asks_for_the_separating_measurement_f
         "Next: first tell tracker_tilt from tip_pull (hold the jets off and compare the base IMU's gravity with "
         "the profile's (run's level check)); if it is the setup, write the corrected profile")
     assert next_lines(("base_sensor_mounting",)).startswith("Next: write the corrected profile and check it with")
+
+
+def test_a_fit_on_its_bound_is_said_in_the_table_and_an_effect_text_prints_as_written(recorded, tmp_path, capsys):
+    """The notes of a fit ("[gain_3 at its bound ...]") and a user effect's explanation are
+    text, not rich markup: printed as markup, the bracketed note vanished from the table."""
+    effect_file = tmp_path / "narrow_gain.py"
+    effect_file.write_text(
+        "import numpy as np\n"
+        "from hydrojet_bench.effects import EffectParameter\n"
+        "class NarrowGain:\n"
+        "    name = 'narrow_gain'\n"
+        "    explanation = 'jet 3 weaker [/notes] [bold]as written[/bold]'\n"
+        "    parameters = (EffectParameter('gain_3', 1.0, 0.87, 1.05, '1', 'jet 3 force scale'),)\n"
+        "    uses_actuation = False\n"
+        "    def apply(self, problem, values):\n"
+        "        problem.jet_gains = problem.jet_gains * np.array([1.0, 1.0, values['gain_3']])\n")
+    out = tmp_path / "diagnosis.json"
+    assert main(["diagnose", str(recorded), "--model", "cosserat", "--candidate", f"{effect_file}:NarrowGain",
+                 "--json", str(out)]) == 0
+    (entry,) = json.loads(out.read_text())["ranking"]
+    assert entry["at_bound"] == ["narrow_gain.gain_3"] and entry["notes"]
+    printed = " ".join(capsys.readouterr().out.split())
+    assert f"[{entry['notes'][0]}]" in printed
+    assert "jet 3 weaker [/notes] [bold]as written[/bold]" in printed

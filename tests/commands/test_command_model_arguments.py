@@ -122,3 +122,17 @@ def test_a_file_effect_in_a_parameter_file_is_found_by_its_name_among_the_effect
     choice = choose_model(None, [], path, DEFAULTS, effect_files=[CLOGGED_JET])
     assert names(choice.model.effects) == ["gravity", "clogged_jet"]
     assert names(choose_model(None, [CLOGGED_JET], path, DEFAULTS).model.effects) == ["gravity", "clogged_jet"]
+
+
+def test_a_parameter_file_keeps_the_effect_file_it_was_calibrated_with(tmp_path):
+    """The command line's file of the same name wins over a file that moved, not over one
+    still there: its parameters were fitted to that file's physics."""
+    other = tmp_path / "other_clogged.py"
+    other.write_text(Path(CLOGGED_JET.rpartition(":")[0]).read_text())
+    path = tmp_path / "clogged.toml"
+    write_parameter_file(path, ParameterFile(model="cosserat", effects=("gravity", CLOGGED_JET),
+                                             parameters={**NOMINAL, "E0": 4.0e5}))
+    assert names(choose_model(None, [CLOGGED_JET], path, DEFAULTS).model.effects) == ["gravity", "clogged_jet"]
+    with pytest.raises(UserError, match=f"{re.escape(str(path))}: effect 'clogged_jet' was calibrated with "
+                                        f".*; {re.escape(str(other))}:CloggedJet is another file of the same name"):
+        choose_model(None, [f"{other}:{CLOGGED_JET.rpartition(':')[2]}"], path, DEFAULTS)

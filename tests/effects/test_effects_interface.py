@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hydrojet_bench.cli import main
-from hydrojet_bench.effects import LIBRARY, load_effect
+from hydrojet_bench.effects import LIBRARY, load_effect, load_effects
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.geometry import so3_exp
 from hydrojet_bench.models import CosseratModel, PrbModel
@@ -86,6 +86,17 @@ def test_a_users_effect_from_a_file_changes_the_shape(tmp_path, model_type):
      "my_effect.py:TorsionalPreload: parameter 'moment_per_length_nm_m' changes nothing apply sets"),
     ("TorsionalPreload", USER_EFFECT.replace('name = "torsional_preload"', 'name = "gravity"'),
      "my_effect.py:TorsionalPreload: name 'gravity' is a library effect's"),
+    # diagnose fits the setup hypotheses beside the candidates, by name.
+    ("TorsionalPreload", USER_EFFECT.replace('name = "torsional_preload"', 'name = "tracker_tilt"'),
+     "my_effect.py:TorsionalPreload: name 'tracker_tilt' is a library effect's or a setup hypothesis's"),
+    ("TorsionalPreload", USER_EFFECT.replace('parameters = (EffectParameter("moment_per_length_nm_m", 0.0, -0.1, 0.1, '
+                                             '"N m/m", "twist"),)', 'parameters = ()').replace(
+        'problem.distributed_moment_in_body_nm_m[:, 2] += values["moment_per_length_nm_m"]', 'pass'),
+     "my_effect.py:TorsionalPreload: it has no parameters and apply changes nothing in the problem"),
+    # Unflagged, a model would reuse one packing for every jet force: stale jets.
+    ("TorsionalPreload", USER_EFFECT.replace('+= values["moment_per_length_nm_m"]',
+                                             '+= values["moment_per_length_nm_m"] * (1 + problem.jet_forces_n[0])'),
+     "my_effect.py:TorsionalPreload: apply changes the problem with the jet forces but uses_actuation is False"),
 ])
 def test_bad_effect_files_give_clear_errors(tmp_path, spec_suffix, text, message):
     with pytest.raises(UserError, match=message):
@@ -119,6 +130,35 @@ def test_an_effect_that_fails_only_on_some_forces_is_named_when_it_fails(tmp_pat
     model.solve([0.0, 0.0, 0.0], PARAMS)
     with pytest.raises(UserError, match="my_effect.py:TorsionalPreload: apply left a non-finite value"):
         model.solve([0.08, 0.0, 0.0], PARAMS)
+
+
+def test_two_files_whose_effects_share_a_name_are_refused_wherever_effects_are_listed(tmp_path, capsys):
+    first = write(tmp_path, USER_EFFECT)
+    second = tmp_path / "other.py"
+    second.write_text(USER_EFFECT.replace("[:, 2]", "[:, 0]"))
+    specs = [f"{first}:TorsionalPreload", f"{second}:TorsionalPreload"]
+    with pytest.raises(UserError, match="are both named 'torsional_preload'; give each class its own name"):
+        load_effects(specs)
+    assert [effect.name for effect in load_effects([specs[0], specs[0], "jet_gain"])] == ["torsional_preload",
+                                                                                         "jet_gain"]
+    unread = str(tmp_path / "unread.csv")
+    for argv in (["calibrate", unread, "--effect", specs[0], "--effect", specs[1], "-o", str(tmp_path / "p.toml")],
+                 ["diagnose", unread, "--candidate", specs[0], "--candidate", specs[1]],
+                 ["diagnose", unread, "--effect", specs[0], "--candidate", specs[1]]):
+        assert main(argv) == 2, argv
+        assert "are both named 'torsional_preload'" in capsys.readouterr().err
+
+
+def test_a_problem_an_effect_leaves_unsolvable_is_a_user_error_naming_the_effect(tmp_path, capsys):
+    text = USER_EFFECT.replace('problem.distributed_moment_in_body_nm_m[:, 2] += values["moment_per_length_nm_m"]',
+                               'problem.distributed_moment_in_body_nm_m = np.full((7, 3), values["moment_per_length_nm_m"])')
+    spec = f"{write(tmp_path, text)}:TorsionalPreload"
+    with pytest.raises(UserError, match=r"RodProblem.distributed_moment_in_body_nm_m with shape \(7, 3\), expected "
+                                        r".* \(effects: gravity, .*my_effect.py:TorsionalPreload\)"):
+        CosseratModel(effects=("gravity", load_effect(spec))).solve([0.05, 0.0, 0.0], PARAMS)
+    assert main(["simulate", "-o", str(tmp_path / "x.csv"), "--hidden", f"{spec}=0.01"]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "my_effect.py:TorsionalPreload" in error, error
 
 
 def test_unknown_names_and_missing_files_are_user_errors(tmp_path):
