@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .effects import LIBRARY, Effect, load_effect, load_effects, qualified_parameter_names
+from .effects import LIBRARY, Effect, command_line_spec, load_effect, load_effects, qualified_parameter_names
 from .errors import UserError
 from .estimation.calibration import DEFAULT_NAMES
 from .models import make_model
@@ -81,7 +81,7 @@ class ModelChoice:
                 continue
             which = "has no values" if len(missing) == len(names) else f"lacks {', '.join(missing)}"
             notes.append(f"effect {effect.name} {which} in {path}: it runs at its defaults, uncalibrated "
-                         f"(calibrate with --effect {effect.name} to fit it)")
+                         f"(calibrate with --effect {command_line_spec(effect)} to fit it)")
         return tuple(notes)
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 
 from ..data.csv_io import write_csv
+from ..effects import command_line_spec
 from ..errors import UserError
 from ..files import check_writable_target, make_folder_for, publish
 from ..plans import clipped_warning, paper_protocol
@@ -67,9 +68,10 @@ def run(args: argparse.Namespace) -> int:
         effect = next(e for e in hidden if e.name == inert[0])
         values = dict(config.hidden_effect_values)
         at = ", ".join(f"{p.name} {values.get(f'{effect.name}.{p.name}', p.default):g}" for p in effect.parameters)
-        raise UserError(f"--hidden {effect.name}: at {at or 'its only setting'} it leaves the twin's rod as it is "
-                        f"(its identity) and would hide nothing; give it a size, e.g. --hidden {effect.name}=VALUE "
-                        f"or {effect.name}:PARAMETER=VALUE")
+        spec = command_line_spec(effect)
+        raise UserError(f"--hidden {spec}: at {at or 'its only setting'} it leaves the twin's rod as it is "
+                        f"(its identity) and would hide nothing; give it a size, e.g. --hidden {spec}=VALUE "
+                        f"or {spec}:PARAMETER=VALUE")
     twin = DigitalTwin(config)
     # The profile's valves give what they can, as on the rig (`run`).
     limits = tuple(table.max_force_n for table in profile.config.valve_calibrations())

@@ -23,7 +23,7 @@ from .sensor_mounting import SensorMounting
 from .shear_extension import ShearExtension
 from .stiffness_profile import StiffnessProfile
 from .tip_pull import TipPull
-from .user import checked_effect
+from .user import CheckedEffect, checked_effect
 
 # Canonical library, in the order users see it: gravity (on by default), then the
 # effects a calibration can add to diagnose a rig, grouped by what they act on
@@ -37,7 +37,7 @@ LIBRARY: dict[str, type] = {
 }
 
 __all__ = ["CALIBRATION_POSES", "Effect", "EffectParameter", "LIBRARY", "SWEEPS", "effect_values",
-           "identifying_rows", "load_effect", "load_effects", "qualified_parameter_names"]
+           "command_line_spec", "identifying_rows", "load_effect", "load_effects", "qualified_parameter_names"]
 
 
 def load_effect(spec: str) -> Effect:
@@ -70,6 +70,12 @@ def load_effect(spec: str) -> Effect:
     except (Exception, SystemExit) as error:
         raise UserError(f"effect {origin}: {class_name}() failed: {_describe(error)}") from None
     return checked_effect(effect, origin, _reserved_names())
+
+
+def command_line_spec(effect: Effect) -> str:
+    """How a command line names ``effect``: a library effect by name, a user's by its file
+    (``path/to/file.py:ClassName``), which its bare name does not load."""
+    return effect.origin if isinstance(effect, CheckedEffect) else effect.name
 
 
 def _reserved_names() -> dict[str, object]:

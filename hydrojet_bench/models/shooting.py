@@ -28,7 +28,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..effects import Effect, effect_values, load_effect
+from ..effects import Effect, command_line_spec, effect_values, load_effect
 from ..errors import ConvergenceError, EffectOutputError
 from ..geometry import quat_from_matrix, se3, so3_log
 from ..params import ModelParameters, actuation_matrix
@@ -321,7 +321,7 @@ class ShootingModel:
         try:
             return self._pack_checked(problem)
         except EffectOutputError as error:
-            raise EffectOutputError(f"{error} (effects: {', '.join(getattr(e, 'origin', e.name) for e in self.effects)})") from None
+            raise EffectOutputError(f"{error} (effects: {', '.join(map(command_line_spec, self.effects))})") from None
 
     def _pack_checked(self, problem: RodProblem) -> PreparedProblem:
         params = problem.params

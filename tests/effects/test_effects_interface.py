@@ -301,3 +301,9 @@ def test_an_effect_editing_arrays_in_place_changes_its_own_problem_only():
         np.testing.assert_array_equal(problem.bending_stiffness_y_nm2, plain.bending_stiffness_y_nm2)
         np.testing.assert_array_equal(problem.tip_sensor_mounting, so3_exp(np.array([0.0, 0.0, 0.1])))
     np.testing.assert_array_equal(CosseratModel().build_problem(np.zeros(3), params).tip_sensor_mounting, np.eye(3))
+
+
+def test_hints_name_a_users_effect_by_its_file_which_is_what_loads_it(tmp_path, capsys):
+    spec = f"{write(tmp_path, USER_EFFECT)}:TorsionalPreload"
+    assert main(["simulate", "-o", str(tmp_path / "x.csv"), "--hidden", f"{spec}=0"]) == 2
+    assert f"e.g. --hidden {spec}=VALUE" in capsys.readouterr().err
