@@ -131,9 +131,10 @@ def _same_effect_file(first: str, second: str) -> bool:
 
 
 def _file_effect_specs(parameter_file: ParameterFile, path: Path | str, effect_files: Sequence[str]) -> list[str]:
-    """The parameter file's effects as specs: a file it names relative to itself, unless
-    an effect file of the command line has the same name (the command line wins); a name
-    outside the library, from an older file, is looked up among those effect files."""
+    """The parameter file's effects as specs: a file it names relative to itself (an
+    effect file of the command line of the same name must be that file: the values were
+    fitted to its physics); a name outside the library, from an older file, is looked up
+    among those effect files."""
     named_files = {load_effect(spec).name: spec for spec in effect_files}
     specs = []
     for spec in parameter_file.effects:
@@ -145,8 +146,6 @@ def _file_effect_specs(parameter_file: ParameterFile, path: Path | str, effect_f
                 raise UserError(f"{path}: effects: {error}") from None
             given = named_files.get(name, resolved)
             if not _same_effect_file(given, resolved):
-                # The command line wins over a file that moved, not over one still there:
-                # the parameters were fitted to that one's physics.
                 raise UserError(f"{path}: effect {name!r} was calibrated with {resolved}; {given} is another "
                                 "file of the same name: give the one it was calibrated with, or calibrate again")
             specs.append(given)

@@ -33,7 +33,7 @@ from ..effects import load_effects
 from ..errors import ConvergenceError, UserError
 from ..estimation import OnlineSettings
 from ..estimation.calibration import (DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_dataset,
-                                      fit_mask, rows_that_identify)
+                                      calibrate_widening, fit_mask, rows_that_identify)
 from ..files import check_writable_target
 from ..inputs import load_dataset, load_steps
 from ..logs.condition import log_condition
@@ -83,9 +83,9 @@ def calibrate(data: Data, *, model: str | None = None, effects: Sequence[str] = 
         raise UserError(f"{measurements.path}: no rows to fit on with fit_on={fit_on!r}; record calibration poses "
                         "with `hydrojet-bench run --plan calibration` and sweeps with `--plan sweeps`")
     try:
-        fit = calibrate_dataset(choice.model, steps, measurements.profile.model_parameters(),
-                                choice.calibration_names, fit_on=fit_on,
-                                position_weight_rad_per_m=position_weight_rad_per_m)
+        fit = calibrate_widening(choice.model, choice.requested, steps, measurements.profile.model_parameters(),
+                                 choice.calibration_names, fit_on=fit_on,
+                                 position_weight_rad_per_m=position_weight_rad_per_m).result
     except ValueError as error:
         raise UserError(f"{measurements.path}: {error}") from None
     content = calibration_parameter_file(choice.model.name, effect_specs(choice.model.effects, Path.cwd()), fit,

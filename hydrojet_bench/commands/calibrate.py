@@ -18,11 +18,9 @@ import numpy as np
 from ..errors import UserError
 from ..files import make_folder_for
 from ..effects import CALIBRATION_POSES, SWEEPS, identifying_rows
-from ..effects.base import at_physical_limits
-from ..estimation.calibration import (ALL_ROWS, DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, CalibrationResult,
-                                      calibrate_dataset, fit_mask, rows_that_identify)
+from ..estimation.calibration import (ALL_ROWS, DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_widening,
+                                      fit_mask, rows_that_identify)
 from ..estimation.setup_warnings import calibration_warnings
-from ..models import ShootingModel, make_model
 from ..model_choice import COSSERAT, ModelChoice, model_choice
 from ..params_io import calibration_parameter_file, check_parameter_output, effect_specs, write_parameter_file
 from . import render
@@ -80,13 +78,14 @@ def run(args: argparse.Namespace) -> int:
     unsettled_steps = warn_if_unsettled_steps(args.input, steps.select(rows))
     used = _rows_used(steps, rows)
     try:
-        result = calibrate_dataset(model, steps, profile.model_parameters(), choice.calibration_names,
-                                   fit_on=fit_on, position_weight_rad_per_m=args.position_weight)
-        result, fitted_model, widened = _widened_at_bounds(choice, steps, result, fit_on, args.position_weight)
+        fitted = calibrate_widening(model, choice.requested, steps, profile.model_parameters(),
+                                    choice.calibration_names, fit_on=fit_on,
+                                    position_weight_rad_per_m=args.position_weight)
     except ValueError as error:
         raise UserError(f"{args.input}: {error}") from None
     console = render.console_for(args)
     console.print(f"fitted on {used}{_why(args.fit_on, fit_on, choice)}", highlight=False)
+    result, widened = fitted.result, fitted.widened
     if widened:
         console.print(f"{', '.join(widened)} ended on {'its' if len(widened) == 1 else 'their'} search bound: "
                       "refitted with the search widened to the physical limits, as diagnose does", highlight=False)
@@ -98,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     console.print(f"RMS orientation error on the {_FITTED_ROWS[fit_on]}: {result.rms_orientation_deg_before:.2f} deg "
                   f"before, {result.rms_orientation_deg_after:.2f} deg after ({result.evaluations} evaluations)")
     warnings = render.progress_console()  # warnings go to standard error, beside the results
-    for warning in calibration_warnings(fitted_model, result):
+    for warning in calibration_warnings(fitted.model, result):
         warnings.print(f"[yellow]warning:[/] {render.plain(warning)}")
     for first, second, correlation in result.unidentifiable:
         warnings.print(f"[yellow]warning:[/] {first} and {second} are not separately identifiable on these rows "
@@ -121,26 +120,6 @@ def run(args: argparse.Namespace) -> int:
     compare = command("compare", *input_words(args), "--params", args.output, "--online")
     print_next(console, "see how it predicts the sweeps with", [compare])
     return 0 if result.converged and not result.at_bound else UNTRUSTED
-
-
-def _widened_at_bounds(choice: ModelChoice, steps, result, fit_on: str,
-                       position_weight: float) -> tuple[CalibrationResult, ShootingModel, tuple[str, ...]]:
-    """A fit whose effect parameters end on a search bound refitted from there with those
-    effects searched up to their physical limits (`at_physical_limits`), as diagnose
-    fits its candidates, so that its figures and this calibration agree; kept when it
-    converged or fits no worse. Returns the result kept, the model it was fitted with (its
-    bounds are the result's) and the parameters widened."""
-    wide = {effect.name: at_physical_limits(effect) for effect in choice.requested
-            if any(f"{effect.name}.{p.name}" in result.at_bound and p.limits != (p.lower, p.upper)
-                   for p in effect.parameters)}
-    if not wide:
-        return result, choice.model, ()
-    model = make_model(choice.model.name, tuple(wide.get(effect.name, effect) for effect in choice.model.effects))
-    wider = calibrate_dataset(model, steps, result.params, choice.calibration_names, fit_on=fit_on,
-                              position_weight_rad_per_m=position_weight)
-    if wider.converged or wider.rms_orientation_deg_after <= result.rms_orientation_deg_after:
-        return wider, model, tuple(name for name in result.at_bound if name.partition(".")[0] in wide)
-    return result, choice.model, ()
 
 
 _FITTED_ROWS = {CALIBRATION_POSES: "calibration poses", SWEEPS: "sweep steps", ALL_ROWS: "calibration poses and sweeps"}

@@ -94,6 +94,10 @@ def checked_effect(effect: object, origin: str, reserved_names: Mapping[str, obj
         raise UserError(f"effect {origin}: parameters must be a tuple of EffectParameter, got {parameters!r}")
     if len({p.name for p in parameters}) != len(parameters):
         raise UserError(f"effect {origin}: two parameters share a name")
+    for parameter in parameters:
+        if not parameter.lower < parameter.upper:
+            raise UserError(f"effect {origin}: parameter {parameter.name!r} has no range to fit (lower = upper = "
+                            f"{parameter.lower:g}); give it bounds lower < upper")
     if not isinstance(effect.uses_actuation, bool):  # type: ignore[attr-defined]
         raise UserError(f"effect {origin}: uses_actuation must be True or False")
     if identifying_rows(effect) not in (CALIBRATION_POSES, SWEEPS):  # type: ignore[arg-type]

@@ -43,8 +43,10 @@ from scipy.optimize import least_squares
 
 from ..data.dataset import Dataset
 from ..effects import CALIBRATION_POSES, SWEEPS, Effect, EffectParameter, identifying_rows
+from ..effects.base import at_physical_limits
 from ..errors import ConvergenceError
 from ..geometry import body_rotation_error, matrix_from_quat
+from ..models import make_model
 from ..models.shooting import (ShootingModel, Solution, tip_sensor_positions_in_base_sensor_m,
                                tip_sensors_in_base_sensor)
 from ..params import DISTURBANCE_NAMES, PARAMETER_NAMES, ModelParameters, get_parameter, with_parameters
@@ -529,6 +531,37 @@ def calibrate_dataset(model: ShootingModel, steps: Dataset, initial: ModelParame
     solved = slice(0, int(np.flatnonzero(mask)[-1]) + 1)
     return calibrate(model, calibration_poses(steps.select(np.arange(len(steps))[solved])), initial, names,
                      follow_path=True, fitted=mask[solved], **options)
+
+
+@dataclass(frozen=True)
+class WidenedCalibration:
+    """`calibrate_widening`'s answer: the result kept, the model it was fitted with (the
+    result's bounds are that model's), and the parameters whose search was widened."""
+
+    result: CalibrationResult
+    model: ShootingModel
+    widened: tuple[str, ...] = ()
+
+
+def calibrate_widening(model: ShootingModel, requested: Sequence[Effect], steps: Dataset,
+                       initial: ModelParameters, names: Sequence[str], **options) -> WidenedCalibration:
+    """`calibrate_dataset`; a fit whose ``requested`` effects' parameters end on a search
+    bound is refitted from there with those effects searched up to their physical limits
+    (`at_physical_limits`), as diagnose fits its candidates, so that a calibration
+    delivers what diagnose found. The wider fit is kept when it converged or fits no
+    worse."""
+    result = calibrate_dataset(model, steps, initial, names, **options)
+    wide = {effect.name: at_physical_limits(effect) for effect in requested
+            if any(f"{effect.name}.{p.name}" in result.at_bound and p.limits != (p.lower, p.upper)
+                   for p in effect.parameters)}
+    if not wide:
+        return WidenedCalibration(result, model)
+    wider_model = make_model(model.name, tuple(wide.get(effect.name, effect) for effect in model.effects))
+    wider = calibrate_dataset(wider_model, steps, result.params, names, **options)
+    if wider.converged or wider.rms_orientation_deg_after <= result.rms_orientation_deg_after:
+        return WidenedCalibration(wider, wider_model,
+                                  tuple(name for name in result.at_bound if name.partition(".")[0] in wide))
+    return WidenedCalibration(result, model)
 
 
 def _default(model: ShootingModel, name: str) -> float | None:

@@ -86,6 +86,8 @@ def test_a_users_effect_from_a_file_changes_the_shape(tmp_path, model_type):
      "my_effect.py:TorsionalPreload: parameter 'moment_per_length_nm_m' changes nothing apply sets"),
     ("TorsionalPreload", USER_EFFECT.replace('name = "torsional_preload"', 'name = "gravity"'),
      "my_effect.py:TorsionalPreload: name 'gravity' is a library effect's"),
+    ("TorsionalPreload", USER_EFFECT.replace("0.0, -0.1, 0.1,", "0.0, 0.0, 0.0,"),
+     "my_effect.py:TorsionalPreload: parameter 'moment_per_length_nm_m' has no range to fit"),
     # diagnose fits the setup hypotheses beside the candidates, by name.
     ("TorsionalPreload", USER_EFFECT.replace('name = "torsional_preload"', 'name = "tracker_tilt"'),
      "my_effect.py:TorsionalPreload: name 'tracker_tilt' is a library effect's or a setup hypothesis's"),
