@@ -116,26 +116,20 @@ def checked_effect(effect: object, origin: str, reserved_names: Mapping[str, obj
                               for trial, forces in zip(plain, _TRIAL_FORCES_N)):
         # Nothing to fit and nothing changed: a calibration "with" it is the one without.
         raise UserError(f"effect {origin}: it has no parameters and apply changes nothing in the problem")
-    if not effect.uses_actuation:  # type: ignore[attr-defined]
-        # A model packs a problem once and reuses it for other jet forces unless an effect
-        # reads them: one that does, unflagged, would be solved with stale jets.
-        for values in (defaults, *({**defaults, p.name: p.upper if p.upper != p.default else p.lower}
-                                   for p in parameters)):
-            trials = plain if values is defaults else _trials_or_none(checked, nominal, values)
-            if trials is not None and not all(_same(trials[0], trial, but="jet_forces_n") for trial in trials[1:]):
-                raise UserError(f"effect {origin}: apply changes the problem with the jet forces but "
-                                "uses_actuation is False; set uses_actuation = True")
+    _check_actuation_flag(checked, plain)
     for parameter in parameters:
         # A parameter apply never reads (a misspelt key read with .get, a value written to
-        # a local) would be calibrated to noise and reported as if it were physics.
+        # a local) would be calibrated to noise and reported as if it were physics. One
+        # whose apply fails at the moved value reads it too: the failure is reported when
+        # a solve meets it (a study records it as that cell's error).
         moved = parameter.upper if parameter.upper != parameter.default else parameter.lower
-        if moved == parameter.default:
+        trials = _trials_or_none(checked, nominal, {**defaults, parameter.name: moved})
+        if trials is None:
             continue
-        changed = {**defaults, parameter.name: moved}
-        if not any(_differs(checked, nominal, forces, changed, unchanged)
-                   for forces, unchanged in zip(_TRIAL_FORCES_N, plain)):
+        if all(_same(trial, unchanged) for trial, unchanged in zip(trials, plain)):
             raise UserError(f"effect {origin}: parameter {parameter.name!r} changes nothing apply sets "
                             f"(from {parameter.default:g} to {moved:g}); apply must use values[{parameter.name!r}]")
+        _check_actuation_flag(checked, trials)
     return checked
 
 
@@ -151,21 +145,19 @@ def _trial(effect: CheckedEffect, params: ModelParameters, jet_forces_n: np.ndar
     return problem
 
 
-def _differs(effect: CheckedEffect, params: ModelParameters, jet_forces_n: np.ndarray, values: Mapping[str, float],
-             unchanged: RodProblem) -> bool:
-    """Whether ``effect`` at ``values`` edits the trial problem otherwise than ``unchanged``.
-    One that fails there reads its parameter too: the failure is reported when a solve
-    meets it (a study records it as that cell's error)."""
-    try:
-        return not _same(_trial(effect, params, jet_forces_n, values), unchanged)
-    except UserError:
-        return True
+def _check_actuation_flag(effect: CheckedEffect, trials: list[RodProblem]) -> None:
+    """A model packs a problem once and reuses it for other jet forces unless an effect
+    reads them: one that does with uses_actuation False would be solved with stale jets.
+    ``trials``: the effect's problems at every trial jet force, one set of values."""
+    if not effect.uses_actuation and not all(_same(trials[0], trial, but="jet_forces_n") for trial in trials[1:]):
+        raise UserError(f"effect {effect.origin}: apply changes the problem with the jet forces but "
+                        "uses_actuation is False; set uses_actuation = True")
 
 
 def _trials_or_none(effect: CheckedEffect, params: ModelParameters,
                     values: Mapping[str, float]) -> list[RodProblem] | None:
     """The trial problems at every trial jet force, or None where apply fails at
-    ``values`` (reported when a solve meets it, as in `_differs`)."""
+    ``values``."""
     try:
         return [_trial(effect, params, forces, values) for forces in _TRIAL_FORCES_N]
     except UserError:
