@@ -37,7 +37,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import msgspec
 import numpy as np
@@ -47,6 +47,9 @@ from .config import PROFILES_DIR, RigConfig, config_from_mapping, load_config, r
 from .config.schema import IDENTITY_QUATERNION, QUATERNION_NORM_TOLERANCE, ZERO_VECTOR
 from .geometry import matrix_from_quat, quat_conjugate, quat_from_matrix, quat_multiply, quat_rotate, se3
 from .params import CapsuleParameters, JetLayout, ModelParameters, RodParameters
+
+if TYPE_CHECKING:
+    from .estimation.online import OnlineSettings
 
 Vector3 = tuple[float, float, float]
 Quaternion = tuple[float, float, float, float]
@@ -188,6 +191,11 @@ class RigProfile:
         """This rig with whole tables of its configuration replaced, e.g.
         ``gravity=GravityTable(in_tracker_m_s2=(9.81, 0.0, 0.0))``."""
         return RigProfile(msgspec.structs.replace(self.config, **tables), self.path)
+
+    def online_settings(self) -> OnlineSettings:
+        """The online estimator's settings (`[estimator]`): what the rig's live sessions
+        used, so every offline estimate of its data uses them too."""
+        return self.config.estimator.online_settings()
 
     @property
     def source(self) -> str:

@@ -31,7 +31,6 @@ from ..analysis.diagnosis.noise import repeatability_floor
 from ..bench.replay import live_difference_deg, logged_steps, read_session, replay as replay_session
 from ..effects import load_effects
 from ..errors import ConvergenceError, UserError
-from ..estimation import OnlineSettings
 from ..estimation.calibration import (DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_dataset,
                                       calibrate_widening, fit_mask, rows_that_identify)
 from ..files import check_writable_target
@@ -108,7 +107,7 @@ def compare(data: Data, params: Params, *, baseline: Params = None, online: bool
     validation = steps.select(validation_rows(steps))
     if len(validation) == 0:
         raise UserError(f"{path}: no steps to compare")
-    settings = OnlineSettings() if online else None
+    settings = steps.profile.online_settings() if online else None
 
     def evaluate(choice: ModelChoice):
         return compare_methods(choice.model, choice.parameters(steps.profile.model_parameters()), validation, settings,
@@ -165,7 +164,7 @@ def replay(log: str | Path, *, model: str | None = None, effects: Sequence[str] 
             raise UserError(f"{log}: cannot calibrate {choice.model.name} on the logged calibration poses: "
                             f"{error}") from None
         values = calibration.params
-    estimates = replay_session(session, choice.model, OnlineSettings() if online else None, values)
+    estimates = replay_session(session, choice.model, session.profile.online_settings() if online else None, values)
     kept = [i for i, estimate in enumerate(estimates) if estimate is not None]
     validation = [i for i in kept if session.steps.sweep[i] >= 0] or kept
     if not validation:

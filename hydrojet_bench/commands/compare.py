@@ -27,7 +27,6 @@ from ..analysis.diagnosis.fitting import scored_as_diagnosed
 from ..analysis.metrics import ErrorSummary
 from ..data.dataset import STEP_WINDOW_S, Dataset
 from ..errors import UserError
-from ..estimation import OnlineSettings
 from ..model_choice import ModelChoice, choose_model, model_choice
 from ..models.shooting import ShootingModel
 from . import render
@@ -95,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
 
     def evaluate(choice: ModelChoice) -> Evaluation:
         params = choice.parameters(profile.model_parameters())
-        results = compare_methods(choice.model, params, validation, OnlineSettings() if args.online else None,
+        results = compare_methods(choice.model, params, validation, profile.online_settings() if args.online else None,
                                   lead_in(steps))
         # diagnose's promise is checked the way it scored.
         as_diagnosed = None if before_choice is None else scored_as_diagnosed(choice.model, params, steps)

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from msgspec.structs import replace
 
+from hydrojet_bench import api
 from hydrojet_bench.bench.replay import live_difference_deg, read_session, replay
 from drivers.imu import output_rate_hz
 from drivers.transport.sim import unregister_device
@@ -68,7 +69,11 @@ async def run_without_leaks(session: Session):
 @pytest.fixture(scope="module")
 def finished_session(tmp_path_factory):
     log_path = tmp_path_factory.mktemp("session") / "session.mcap"
-    session = Session(make_request(log_path))
+    request = make_request(log_path)
+    # Not the default gains, as a profile's [estimator] may set: an offline estimate must take the log's own.
+    estimator = replace(request.settings.estimator, gain=0.7, iterations=1)
+    session = Session(dataclasses.replace(request, profile=request.profile.with_tables(estimator=estimator),
+                                          settings=replace(request.settings, estimator=estimator)))
     result = asyncio.run(run_without_leaks(session))
     return session, result
 
@@ -118,9 +123,12 @@ def test_log_holds_every_stream(finished_session):
 def test_replay_with_the_live_settings_reproduces_the_live_estimates_exactly(finished_session):
     session, result = finished_session
     logged = read_session(session.request.log_path)
+    assert logged.profile.online_settings() == OnlineSettings(gain=0.7, iterations=1)
     model, _ = build_model("cosserat", [])
-    estimates = replay(logged, model, OnlineSettings())
+    estimates = replay(logged, model, logged.profile.online_settings())
     assert live_difference_deg(logged, estimates) == 0.0
+    # The command's path (the API) takes the settings from the log's profile.
+    assert api.replay(session.request.log_path, online=True).live_difference_deg == 0.0
     for live, replayed in zip(result.estimates, estimates):
         np.testing.assert_array_equal(live.online.tip_orientation_in_base, replayed.online.tip_orientation_in_base)
         np.testing.assert_array_equal(live.online.disturbance_moment_nm, replayed.online.disturbance_moment_nm)
@@ -130,7 +138,7 @@ def test_replay_with_another_model_differs_but_stays_close(finished_session):
     session, _ = finished_session
     logged = read_session(session.request.log_path)
     model, _ = build_model("prb", [])
-    estimates = replay(logged, model, OnlineSettings())
+    estimates = replay(logged, model, logged.profile.online_settings())
     difference = live_difference_deg(logged, estimates)
     # PRB(20) and Cosserat agree to ~0.03 mm; on the same parameters the online errors
     # differ, but by far less than the errors themselves.
