@@ -201,8 +201,16 @@ def test_the_shipped_physical_rig_with_a_misspelt_table_does_not_load(tmp_path: 
     ("[transports]\nimu_bus = -1\n", "transports.imu_bus", "I2C bus number"),
     ('[tracker]\ntools = ["base", "base"]\n', "tracker.tools", 'each of "base" and "tip" once'),
     ("[imu]\nbase_address = 0x69\n", "imu.tip_address", "must differ from imu.base_address"),
-    ("[imu]\nbase_address = 0x70\n", "imu.base_address", "must be an integer >= 104 and <= 105, got 112"),
+    ("[imu]\nbase_address = 0x70\n", "imu.base_address", "must be 0x68 or 0x69 (the ICM-20948's AD0 pin low or "
+     "high), got 0x70"),
+    ("[imu]\ntip_address = 'x'\n", "imu.tip_address", "must be an integer, got 'x'"),
     ("[valves]\nheartbeat_ms = 300\n", "valves.heartbeat_ms", "below half of valves.watchdog_ms"),
+    # The firmware counts its watchdog in 16 bits of milliseconds.
+    ("[valves]\nwatchdog_ms = 100000\n", "valves.watchdog_ms", "must be a number >= 1 and <= 65535, got 100000"),
+    # The Aurora measures at 40 Hz: a faster poll would be a stream forever "behind".
+    ("[tracker]\nrate_hz = 60\n", "tracker.rate_hz", "must be a number > 0 and <= 40, got 60"),
+    ('[tracker]\ntools = ["tip", "base", "probe"]\n', "tracker.tools",
+     "names 'probe', but the simulated tracker (transports.tracker = 'sim') has the base and tip sensors only"),
     ("[valves.calibration]\njet4 = { force_n = [0, 1], duty_permille = [0, 1000] }\n",
      "valves.calibration.jet4", "is not a known key"),
     ("[valves.calibration]\njet1 = { force_n = [0.1, 0.0], duty_permille = [0, 1000] }\n",
@@ -335,3 +343,22 @@ def test_a_profile_with_a_byte_order_mark_loads_as_without(tmp_path: Path) -> No
     marked = tmp_path / "marked.toml"
     marked.write_bytes(b"\xef\xbb\xbf" + (MINIMAL + "[jets]\nring_angle_deg = 5.0\n").encode())
     assert load_profile(marked).config.jets.ring_angle_deg == 5.0
+
+
+@pytest.mark.parametrize(("parent", "child", "expected"), [
+    ("[imu]\nbogus = 1\n", "", "{parent} (extended by {child}): imu.bogus is not a known key"),
+    ("[rod]\nlength_m = -1.0\n", "[rod]\nradius_m = 0.003\n",
+     "{parent} (extended by {child}): rod.length_m must be a finite number > 0"),
+    ("[valves]\nheartbeat_ms = 300\n", "", "{parent} (extended by {child}): valves.heartbeat_ms must be below"),
+    ("[session]\nwindow_s = 0.01\n", "", "{parent} (extended by {child}): session.window_s = 0.01 s holds"),
+    # The child's own value is the child's mistake, whatever the parent holds.
+    ("[imu]\nrate_hz = 0.0\n", "[imu]\nrate_hz = 2000.0\n", "{child}: imu.rate_hz must be a number"),
+    ("[rod]\nlength_m = -1.0\n", "[rod]\nlength_m = 0.08\n[imu]\nbogus = 1\n", "{child}: imu.bogus"),
+])
+def test_a_mistake_in_a_parent_profile_names_the_parent(tmp_path: Path, parent: str, child: str,
+                                                        expected: str) -> None:
+    write(tmp_path, MINIMAL + parent, "parent.toml")
+    path = write(tmp_path, 'extends = "parent.toml"\n' + child, "child.toml")
+    with pytest.raises(UserError) as info:
+        load_profile(path)
+    assert str(info.value).startswith(expected.format(parent=tmp_path / "parent.toml", child=path)), str(info.value)

@@ -38,14 +38,20 @@ def read_toml(path: Path, what: str = "file") -> dict[str, Any]:
         raise UserError(f"{path}: cannot read: {error.strerror or error}") from None
 
 
-def convert(document: Mapping[str, Any], schema: type[T], source: str) -> T:
-    """``document`` as a ``schema`` instance; ``source`` names the document in errors."""
-    if problem := top_level_problem(document, schema):
-        raise UserError(f"{source}: {problem}")
-    try:
-        return msgspec.convert(document, schema)
-    except msgspec.ValidationError as error:
-        raise UserError(f"{source}: {explain(str(error), document, schema)}") from None
+def convert(document: Mapping[str, Any], schema: type[T], source: str,
+            origins: Mapping[tuple[str, ...], str] | None = None) -> T:
+    """``document`` as a ``schema`` instance; ``source`` names the document in errors,
+    or, for a value that came from another file, ``origins`` (keys down to a value ->
+    the file it came from, `_resolve_extends`) names that one."""
+    problem = top_level_problem(document, schema)
+    if problem is None:
+        try:
+            return msgspec.convert(document, schema)
+        except msgspec.ValidationError as error:
+            problem = explain(str(error), document, schema)
+    origin = (origins or {}).get(tuple(key for key in problem.keys if isinstance(key, str)), source)
+    where = source if origin == source else f"{origin} (extended by {source})"
+    raise UserError(f"{where}: {problem.text}")
 
 
 def resolve_profile_path(spec: str | Path, relative_to: Path | None = None) -> Path:
@@ -73,20 +79,24 @@ def config_from_mapping(document: Mapping[str, Any], *, source: str, path: Path 
     """A parsed profile document, typed and checked. ``extends`` resolves against
     ``path``'s folder (the working directory without one); ``name`` defaults to
     ``path``'s stem."""
-    merged = _resolve_extends(document, source, path, seen=(path.resolve(),) if path is not None else ())
+    origins: dict[tuple[str, ...], str] = {}
+    merged = _resolve_extends(document, source, path, (path.resolve(),) if path is not None else (), origins)
     if "name" not in document:
         # A child profile is its own rig: it never inherits its parent's name.
         merged.pop("name", None)
         if path is not None:
             merged["name"] = path.stem
-    return convert(merged, RigConfig, source)
+    return convert(merged, RigConfig, source, origins)
 
 
 def _resolve_extends(document: Mapping[str, Any], source: str, path: Path | None,
-                     seen: tuple[Path, ...]) -> dict[str, Any]:
+                     seen: tuple[Path, ...], origins: dict[tuple[str, ...], str]) -> dict[str, Any]:
+    """``document`` over its ``extends`` chain; ``origins`` gets each key (a table's and
+    each value's, as the keys down to it) and the file whose value is kept."""
     child = dict(document)
     parent_spec = child.pop("extends", None)
     if parent_spec is None:
+        _note_origins(child, source, (), origins)
         return child
     if not isinstance(parent_spec, str):
         raise UserError(f"{source}: extends must be a profile name or a relative path, got {parent_spec!r}")
@@ -98,8 +108,17 @@ def _resolve_extends(document: Mapping[str, Any], source: str, path: Path | None
         chain = " -> ".join(str(p) for p in (*seen, parent_path.resolve()))
         raise UserError(f"{source}: extends {parent_spec!r} makes a cycle ({chain})")
     parent = _resolve_extends(read_toml(parent_path), str(parent_path), parent_path,
-                              (*seen, parent_path.resolve()))
+                              (*seen, parent_path.resolve()), origins)
+    _note_origins(child, source, (), origins)  # after the parent's: the child's values win
     return _merge(parent, child)
+
+
+def _note_origins(document: Mapping[str, Any], source: str, keys: tuple[str, ...],
+                  origins: dict[tuple[str, ...], str]) -> None:
+    for key, value in document.items():
+        origins[(*keys, key)] = source
+        if isinstance(value, Mapping):
+            _note_origins(value, source, (*keys, key), origins)
 
 
 def _merge(parent: Mapping[str, Any], child: Mapping[str, Any]) -> dict[str, Any]:

@@ -29,16 +29,23 @@ _LARGEST_FLOAT = sys.float_info.max
 _SCALAR_WORDS = {float: "a number", int: "an integer", str: "a string", bool: "true or false"}
 
 
-def top_level_problem(document: Mapping[str, Any], schema: type) -> str | None:
+class Problem(typing.NamedTuple):
+    """A worded problem and the keys down to the value it is about (from the top)."""
+
+    text: str
+    keys: tuple[str | int | None, ...]
+
+
+def top_level_problem(document: Mapping[str, Any], schema: type) -> Problem | None:
     """What msgspec would report late, or not word well, about the top level: an unknown
     key (a misspelt table, whose correct name would otherwise be reported missing), then
     the first required field absent, down to the first required key of an absent table."""
     known = schema.__struct_fields__
     for key in document:
         if key not in known:
-            return f"{_key(key)} is not a known key{_suggestion(key, schema, [])}"
+            return Problem(f"{_key(key)} is not a known key{_suggestion(key, schema, [])}", (key,))
     missing = _first_missing(document, schema)
-    return f"{missing} is required" if missing else None
+    return Problem(f"{missing} is required", ()) if missing else None
 
 
 def _first_missing(document: Mapping[str, Any], schema: type) -> str | None:
@@ -50,7 +57,7 @@ def _first_missing(document: Mapping[str, Any], schema: type) -> str | None:
     return None
 
 
-def explain(error: str, document: Mapping[str, Any], schema: type) -> str:
+def explain(error: str, document: Mapping[str, Any], schema: type) -> Problem:
     """msgspec's ``"Expected `float` > 0.0 - at `$.rod.length_m`"`` as ``"rod.length_m
     must be a finite number > 0, got -0.07"``."""
     match = _PATH.match(error)
@@ -59,16 +66,21 @@ def explain(error: str, document: Mapping[str, Any], schema: type) -> str:
     parts = _pinpoint(_path_parts(raw_path), document, schema)
     dotted = _dotted(parts)
     if found := _MISSING.match(message):
-        return f"{_join(dotted, found['field'])} is required"
+        return Problem(f"{_join(dotted, found['field'])} is required", ())
     if found := _UNKNOWN.match(message):
-        return f"{_join(dotted, found['field'])} is not a known key{_suggestion(found['field'], schema, parts)}"
+        return Problem(f"{_join(dotted, found['field'])} is not a known key"
+                       f"{_suggestion(found['field'], schema, parts)}", (*parts, found["field"]))
     if _EXPECTED.match(message) or _ENUM.match(message):
         expected = _phrase(_annotation_at(schema, parts))
-        return f"{dotted or 'the file'} must be {expected}, got {_describe(_value_at(document, parts))}"
-    # A check in a table's __post_init__: its message starts with the field's name.
+        return Problem(f"{dotted or 'the file'} must be {expected}, got {_describe(_value_at(document, parts))}",
+                       tuple(parts))
+    # A check in a table's __post_init__: its message starts with the (dotted) name of
+    # the field it is about; other keys it weighs are named in the text.
+    field = [*parts, *message.split(" ", 1)[0].split(".")]
+    keys = tuple(field) if _annotation_at(schema, field) is not None else ()
     if dotted and not message.startswith(f"{dotted}."):
-        return f"{dotted}.{message}"
-    return message
+        return Problem(f"{dotted}.{message}", keys)
+    return Problem(message, keys)
 
 
 def _path_parts(raw_path: str) -> list[str | int | None]:

@@ -38,6 +38,7 @@ from typing import Annotated
 
 import msgspec
 
+from drivers.aurora.client import FRAME_PERIOD_S as AURORA_FRAME_PERIOD_S
 from drivers.imu.calibration import ImuCalibration
 from drivers.imu.fusion import DEFAULT_FUSION, FusionName
 from drivers.transport.url import open_transport
@@ -264,10 +265,15 @@ class TransportsTable(Table, kw_only=True):
         return self.valves in (SIM, PTY) and self.tracker in (SIM, PTY) and self.imu_bus == SIM
 
 
+# The sensors the simulated rig's tracker has (the twin's).
+SIMULATED_TOOLS = ("base", "tip")
+
+
 class TrackerTable(Table, kw_only=True):
     tools: tuple[str, ...] = ("base", "tip")  # names of the tracker's sensors in port order
     use_tx: bool = False                      # poll TX (text) frames instead of BX (binary)
-    rate_hz: Positive = 40.0                  # polling rate; the Aurora delivers 40 frames/s
+    # Polling rate; the Aurora measures at 40 Hz, so a faster poll would only repeat frames.
+    rate_hz: Annotated[float, msgspec.Meta(gt=0.0, le=1.0 / AURORA_FRAME_PERIOD_S)] = 1.0 / AURORA_FRAME_PERIOD_S
 
     def __post_init__(self) -> None:
         if {"base", "tip"} - set(self.tools) or len(set(self.tools)) != len(self.tools):
@@ -290,12 +296,12 @@ class ImuChipTable(Table, kw_only=True):
         return ImuCalibration(mag_hard_iron_ut=self.mag_hard_iron_ut, mag_soft_iron=self.mag_soft_iron)
 
 
-_ImuAddress = Annotated[int, msgspec.Meta(ge=0x68, le=0x69)]  # ICM-20948: AD0 low or high
+IMU_ADDRESSES = (0x68, 0x69)  # ICM-20948: AD0 low or high
 
 
 class ImuTable(Table, kw_only=True):
-    base_address: _ImuAddress = 0x68
-    tip_address: _ImuAddress = 0x69
+    base_address: int = IMU_ADDRESSES[0]
+    tip_address: int = IMU_ADDRESSES[1]
     # Output rate asked of the chips (the nearest ICM-20948 rate at or above it is used:
     # 1125 Hz / (1 + divider), divider 0..255); every sample is fused and logged.
     rate_hz: Annotated[float, msgspec.Meta(ge=4.4, le=1125.0)] = 40.0
@@ -307,6 +313,11 @@ class ImuTable(Table, kw_only=True):
     tip: ImuChipTable = msgspec.field(default_factory=ImuChipTable)   # [imu.tip]
 
     def __post_init__(self) -> None:
+        for name in ("base_address", "tip_address"):
+            # Said in hex, as the datasheet and a bus scan (i2cdetect) give them.
+            if getattr(self, name) not in IMU_ADDRESSES:
+                raise ValueError(f"{name} must be 0x68 or 0x69 (the ICM-20948's AD0 pin low or high), "
+                                 f"got {getattr(self, name):#04x}")
         if self.base_address == self.tip_address:
             raise ValueError(f"tip_address must differ from imu.base_address (both {self.base_address:#04x})")
 
@@ -337,7 +348,8 @@ class ValveCalibrationTable(Table, kw_only=True):
 
 
 class ValvesTable(Table, kw_only=True):
-    watchdog_ms: Positive = 500.0       # the firmware's (and emulator's) silence limit
+    # The firmware's (and emulator's) silence limit; it counts whole milliseconds in 16 bits.
+    watchdog_ms: Annotated[float, msgspec.Meta(ge=1.0, le=65535.0)] = 500.0
     heartbeat_ms: Positive = 100.0      # host PING when idle this long
     reply_timeout_ms: Positive = 100.0  # per request, before a retry
     retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 3  # resends of an unanswered request
@@ -513,6 +525,11 @@ class RigConfig(Table, kw_only=True):
         if self.session.window_s < 2.0 / slowest_hz:
             raise ValueError(f"session.window_s = {self.session.window_s:g} s holds fewer than two samples of the "
                              f"slowest stream ({stream} = {slowest_hz:g}): make it at least {2.0 / slowest_hz:g} s")
+        extra_tools = [tool for tool in self.tracker.tools if tool not in SIMULATED_TOOLS]
+        if self.transports.tracker in (SIM, PTY) and extra_tools:
+            raise ValueError(f"tracker.tools names {', '.join(map(repr, extra_tools))}, but the simulated tracker "
+                             f"(transports.tracker = {self.transports.tracker!r}) has the {' and '.join(SIMULATED_TOOLS)} "
+                             "sensors only")
 
     def valve_calibrations(self) -> tuple[JetCalibration, ...]:
         """The valve client's force -> duty table per jet."""
