@@ -343,6 +343,7 @@ def plan_from_rows(rows: list[dict[str, object]], source: str, default_settle_s:
         raise ValueError(f"{source}: {error}") from None
     steps = []
     counters: dict[int, int] = {}
+    rows_by_label: dict[tuple[int, int], int] = {}
     for number, row in enumerate(rows, start=1):
         unknown = sorted(set(row) - {"q1", "q2", "q3", "settle_s", "sweep", "step"})
         if unknown:
@@ -360,6 +361,12 @@ def plan_from_rows(rows: list[dict[str, object]], source: str, default_settle_s:
             steps.append(PlanStep(forces, sweep, step, settle_s))  # type: ignore[arg-type]
         except (TypeError, ValueError) as error:
             raise ValueError(f"{source}, row {number}: {error}") from None
+        # A recording's steps are told apart by these labels: two rows under one would
+        # be read back as a single step.
+        earlier = rows_by_label.setdefault((sweep, step), number)
+        if earlier != number:
+            raise ValueError(f"{source}, row {number}: sweep {sweep} step {step} is already row {earlier}'s; "
+                             "each (sweep, step) pair names one step (leave step out to number a sweep's rows)")
     if not steps:
         raise ValueError(f"{source}: the plan has no steps")
     return Plan(tuple(steps))

@@ -149,6 +149,8 @@ def test_built_in_plans_honour_their_argument(spec, steps):
 @pytest.mark.parametrize(("spec", "message"), [
     ("calibration:five", "calibration:COUNT takes a whole number of poses >= 1"),
     ("calibration:0", "calibration:COUNT takes a whole number"),
+    # Allocated before a single pose was played (7.5 GiB for 999999999).
+    ("calibration:999999999", r"calibration:COUNT takes a whole number of poses >= 1 and <= 100000"),
     ("paper:3", "paper takes no argument"),
     ("sweeps:2", "sweeps takes no argument"),
 ])
@@ -168,6 +170,11 @@ def test_a_built_in_plans_argument_is_never_ignored(spec, message):
      r"plan.toml: setle_s is not a known key; a plan file takes settle_s and \[\[step\]\] tables"),
     ("plan.csv", "q1,q2,q3\n0.05,0,0,99\n", r"plan.csv, row 1: more values than the header has columns"),
     ("plan.csv", "q1,q1,q2,q3\n0.05,0.01,0,0\n", r"plan.csv: column 'q1' appears twice in the header"),
+    # Two rows under one label were read back from the recording as one step.
+    ("plan.csv", "q1,q2,q3,sweep,step\n0.05,0,0,-1,0\n0.03,0.03,0,0,0\n0,0.03,0.03,0,0\n",
+     r"plan.csv, row 3: sweep 0 step 0 is already row 2's; each \(sweep, step\) pair names one step"),
+    ("plan.toml", "[[step]]\nq1 = 0\nq2 = 0\nq3 = 0\n[[step]]\nq1 = 0.01\nq2 = 0\nq3 = 0\nstep = 0\n",
+     r"plan.toml, row 2: sweep 0 step 0 is already row 1's"),
 ])
 def test_plan_file_mistakes_name_the_file_and_row(tmp_path, name, content, message):
     path = tmp_path / name

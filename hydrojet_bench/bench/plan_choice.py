@@ -28,6 +28,8 @@ from ..plans import (DEFAULT_SETTLE_S, MAX_SETTLE_S, Plan, calibration_plan, hol
                      plan_from_rows, validation_sweeps)
 
 BUILT_IN = ("paper", "calibration", "sweeps", "imu-vs-em", "hold")
+# A plan is made whole before it plays: a count past any session's length only fills memory.
+MAX_CALIBRATION_POSES = 100_000
 
 
 def choose_plan(spec: str, settle_s: float = DEFAULT_SETTLE_S, seed: int = 0) -> Plan:
@@ -41,8 +43,9 @@ def choose_plan(spec: str, settle_s: float = DEFAULT_SETTLE_S, seed: int = 0) ->
         if not colon:
             return calibration_plan(seed=seed, settle_s=settle_s)
         # isdigit alone takes "²", which int() refuses.
-        if not (argument.isascii() and argument.isdigit()) or int(argument) < 1:
-            raise UserError(f"plan {spec!r}: calibration:COUNT takes a whole number of poses >= 1")
+        if not (argument.isascii() and argument.isdigit()) or not 1 <= int(argument) <= MAX_CALIBRATION_POSES:
+            raise UserError(f"plan {spec!r}: calibration:COUNT takes a whole number of poses >= 1 and <= "
+                            f"{MAX_CALIBRATION_POSES} (nearly six days at 5 s a pose)")
         return calibration_plan(int(argument), seed=seed, settle_s=settle_s)
     if name == "sweeps":
         return validation_sweeps(settle_s=settle_s)
