@@ -1,4 +1,4 @@
-"""Read-only smoke checks of a rig's devices: `pytest --rig profiles/hydrojet-v1.toml`.
+"""Read-only smoke checks of a rig's devices: `pytest tests/rig --rig profiles/hydrojet-v1.toml`.
 
 Skipped unless --rig names a profile. Nothing here opens a valve: the rig is opened as
 every session opens it (`bench.rig.open_rig`: valve controller armed, ALL_OFF on close),
@@ -17,6 +17,7 @@ import pytest
 
 from hydrojet_bench.bench.clock import ScaledClock
 from hydrojet_bench.bench.rig import open_rig
+from hydrojet_bench.errors import UserError
 from hydrojet_bench.profile import load_profile
 
 pytestmark = pytest.mark.rig
@@ -24,11 +25,22 @@ pytestmark = pytest.mark.rig
 
 @contextlib.asynccontextmanager
 async def rig_under_test(profile_spec: str):
-    profile = load_profile(profile_spec)
-    # At the profile's time scale, as a session opens it: 1 on hardware; the simulated
-    # rig's 25 turns its 20 s of IMU gyro-bias sampling (100 samples a chip at 10 Hz)
-    # into 0.8 s.
-    async with open_rig(profile, profile.config, ScaledClock(profile.config.session.time_scale)) as rig:
+    # A profile that does not load or a device that is not there is the tester's set-up,
+    # not a failed check: one line, as the bench would say it, not a traceback.
+    problem = None
+    try:
+        profile = load_profile(profile_spec)
+        # At the profile's time scale, as a session opens it: 1 on hardware; the simulated
+        # rig's 25 turns its 20 s of IMU gyro-bias sampling (100 samples a chip at 10 Hz)
+        # into 0.8 s.
+        opened = open_rig(profile, profile.config, ScaledClock(profile.config.session.time_scale))
+        rig = await opened.__aenter__()
+    except UserError as error:
+        problem = str(error)
+    if problem is not None:
+        pytest.fail(f"--rig {profile_spec}: cannot open the rig: {problem}", pytrace=False)
+    async with contextlib.AsyncExitStack() as stack:
+        stack.push_async_exit(opened)
         yield rig
 
 
