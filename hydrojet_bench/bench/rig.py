@@ -15,9 +15,10 @@ import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
 
+from drivers.aurora import AuroraTimeoutError
 from drivers.aurora.client import AuroraTracker
 from drivers.imu import AsyncIcm20948, Icm20948, ImuPairFusion, sample_rate_divider_for
-from drivers.valve.client import ValveController
+from drivers.valve.client import ValveController, ValveTimeoutError
 from drivers.transport import TransportOpenError
 
 from ..config import SIM, RigConfig
@@ -111,6 +112,10 @@ async def _open_port(stack: contextlib.AsyncExitStack, device, profile: RigProfi
     them, like the IMU bus."""
     try:
         await stack.enter_async_context(device)
+    except (AuroraTimeoutError, ValveTimeoutError) as error:
+        # The port opened and nothing answers: another device's port, or one switched off.
+        raise UserError(f"{profile.source}: transports.{key} = {url!r}: the port opened but {error} (is the "
+                        "device on this port, and powered?)") from None
     except Exception as error:
         cause: BaseException | None = error
         while cause is not None and not isinstance(cause, TransportOpenError):

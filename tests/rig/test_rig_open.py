@@ -48,3 +48,34 @@ def test_open_rig_arms_the_valves_last_and_closes_them_on_exit(run_async, failur
     assert sources == ["rig", "tracker", "imu", "before_arming", "valves"]
     assert rig.simulated.valve_emulator.duties_permille == (0, 0, 0)
     assert not rig.simulated.twin.jet_forces_n.any()
+
+
+# The tracker takes the same path (an AuroraTimeoutError after its resets: 9 s of retries).
+@pytest.mark.parametrize("key", ["valves"])
+def test_a_port_where_nothing_answers_is_named_by_its_profile_key(run_async, key):
+    import os
+
+    from hydrojet_bench.errors import UserError
+
+    # A terminal nobody listens on: the port opens, no device replies (a wrong port, or
+    # the device switched off).
+    listener, silent = os.openpty()
+    try:
+        profile = load_profile("sim")
+        url = f"pty://{os.ttyname(silent)}"
+        settings = msgspec.structs.replace(
+            profile.config, transports=msgspec.structs.replace(profile.config.transports, **{key: url}),
+            imu=msgspec.structs.replace(profile.config.imu, gyro_bias_samples=0))
+
+        async def check():
+            async with open_rig(profile, settings, ScaledClock(settings.session.time_scale)):
+                pass
+
+        with pytest.raises(UserError) as info:
+            run_async(check, timeout_s=60.0)
+    finally:
+        os.close(listener)
+        os.close(silent)
+    message = str(info.value)
+    assert message.startswith(f"{profile.source}: transports.{key} = {url!r}: the port opened but "), message
+    assert message.endswith("(is the device on this port, and powered?)") and "\n" not in message
