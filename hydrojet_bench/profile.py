@@ -37,19 +37,16 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import Any, NamedTuple
 
 import msgspec
 import numpy as np
 from numpy.typing import ArrayLike
 
 from .config import PROFILES_DIR, RigConfig, config_from_mapping, load_config, resolve_profile_path
-from .config.schema import IDENTITY_QUATERNION, QUATERNION_NORM_TOLERANCE, ZERO_VECTOR
+from .config.schema import IDENTITY_QUATERNION, QUATERNION_NORM_TOLERANCE, ZERO_VECTOR, OnlineSettings
 from .geometry import matrix_from_quat, quat_conjugate, quat_from_matrix, quat_multiply, quat_rotate, se3
 from .params import CapsuleParameters, JetLayout, ModelParameters, RodParameters
-
-if TYPE_CHECKING:
-    from .estimation.online import OnlineSettings
 
 Vector3 = tuple[float, float, float]
 Quaternion = tuple[float, float, float, float]
