@@ -29,7 +29,8 @@ from ..estimation.setup_warnings import calibration_warnings
 from ..logs import read_log
 from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log
 from ..logs.topics import Sample
-from ..model_choice import ModelDefaults, model_choice
+from ..model_choice import ModelChoice, ModelDefaults, model_choice
+from ..params import ModelParameters
 from . import render
 from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
@@ -65,14 +66,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    for option in ("min_hold", "settle", "max_gap"):
-        value = getattr(args, option)
-        if value is not None and not (np.isfinite(value) and value >= 0):
-            raise UserError(f"--{option.replace('_', '-')} must be a number of seconds >= 0, got {value}")
-    if args.max_gap is not None and args.max_gap > MAX_GAP_LIMIT_S:
-        raise UserError(f"--max-gap must be at most {MAX_GAP_LIMIT_S:g} s (a longer EM gap spans several plan "
-                        f"steps), got {args.max_gap}")
+    check_options(args)
+    # Every input and output is checked before the analysis, whose tables would
+    # otherwise be printed in full above the one line that refuses them.
+    render.check_json_output(args.json)
     em, imu, metadata = load_sources(args.input, args.profile)
+    choice, params = choose_parameters(args, em, metadata.get("bench", {}))
     log_damage = warn_if_incomplete(args.input)
     streams_short = warn_if_streams_fell_short(args.input)
     console = render.console_for(args)
@@ -81,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as error:
         raise UserError(f"{args.input}: cannot align the IMU and EM samples: {error}") from None
     print_agreement(console, agreement, args.input)
-    estimation, model_line = estimate(args, em, imu, metadata.get("bench", {}), console)
+    estimation, model_line = estimate(args, choice, params, em, imu, console)
     if estimation is not None:
         print_estimation(console, estimation, model_line)
     if args.json:
@@ -97,6 +96,17 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def check_options(args: argparse.Namespace) -> None:
+    """--min-hold, --settle and --max-gap are seconds >= 0; --max-gap at most a minute."""
+    for option in ("min_hold", "settle", "max_gap"):
+        value = getattr(args, option)
+        if value is not None and not (np.isfinite(value) and value >= 0):
+            raise UserError(f"--{option.replace('_', '-')} must be a number of seconds >= 0, got {value}")
+    if args.max_gap is not None and args.max_gap > MAX_GAP_LIMIT_S:
+        raise UserError(f"--max-gap must be at most {MAX_GAP_LIMIT_S:g} s (a longer EM gap spans several plan "
+                        f"steps), got {args.max_gap}")
+
+
 def load_sources(log: Path, profile: str | None) -> tuple[Dataset, Dataset, dict]:
     """The log's EM samples, its IMU samples (with the IMU earth frame's gravity) and its
     metadata. A log without IMU samples is a `UserError` that says so."""
@@ -110,17 +120,25 @@ def load_sources(log: Path, profile: str | None) -> tuple[Dataset, Dataset, dict
     return em, dataset_from_log(log, imu_profile(em.profile), source="imu"), contents.metadata
 
 
-def estimate(args: argparse.Namespace, em: Dataset, imu: Dataset, bench: dict[str, str],
-             console: Console) -> tuple[EstimatorComparison | None, str]:
-    """The online estimator fed by each source (None, with a note, when there is
-    nothing to calibrate on), and a line naming the model and its parameters."""
-    em_steps, imu_steps = em.quasistatic_steps(), imu.quasistatic_steps()
+def choose_parameters(args: argparse.Namespace, em: Dataset,
+                      bench: dict[str, str]) -> tuple[ModelChoice, ModelParameters | None]:
+    """The model (the live one unless --model, --effect or --params say otherwise) and the
+    --params values on the log's profile (None without --params: calibrated later)."""
     live = ModelDefaults(bench.get("model", "cosserat"), tuple(json.loads(bench.get("effects", "[]"))))
     choice = model_choice(args, live)
+    if args.params is None:
+        return choice, None
+    return choice, choice.parameters(em.profile.model_parameters())
+
+
+def estimate(args: argparse.Namespace, choice: ModelChoice, params: ModelParameters | None, em: Dataset,
+             imu: Dataset, console: Console) -> tuple[EstimatorComparison | None, str]:
+    """The online estimator fed by each source (None, with a note, when there is
+    nothing to calibrate on), and a line naming the model and its parameters.
+    ``params``: those of --params, else None to calibrate on the EM calibration poses."""
+    em_steps, imu_steps = em.quasistatic_steps(), imu.quasistatic_steps()
     model = choice.model
-    base = em.profile.model_parameters()
-    if args.params is not None:
-        params = choice.parameters(base)
+    if params is not None:
         origin = f"parameters from {args.params}"
         warn_if_uncalibrated(choice)
     else:
@@ -130,7 +148,7 @@ def estimate(args: argparse.Namespace, em: Dataset, imu: Dataset, bench: dict[st
                           "online estimation skipped[/]")
             return None, ""
         try:
-            calibration = calibrate_dataset(model, poses, base, choice.calibration_names)
+            calibration = calibrate_dataset(model, poses, em.profile.model_parameters(), choice.calibration_names)
         except (ValueError, ConvergenceError) as error:
             raise UserError(f"{args.input}: cannot calibrate {model.name} on the EM calibration poses: "
                             f"{error}") from None

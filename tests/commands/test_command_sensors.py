@@ -110,3 +110,18 @@ def test_a_log_without_calibration_poses_is_reported_not_a_traceback(tmp_path, c
     assert main(["calibrate", str(log), "-o", str(tmp_path / "p.toml")]) == 2
     assert capsys.readouterr().err == (f"error: {log}: no calibration poses (steps of sweep -1) to fit on; record "
                                        "some with `hydrojet-bench run --plan calibration`\n")
+
+
+def test_a_missing_parameter_file_or_a_json_path_it_may_not_replace_is_refused_before_the_analysis(
+        session_log, tmp_path, capsys):
+    """Both were refused only after every table had been printed."""
+    missing = tmp_path / "nosuch.toml"
+    assert main(["sensors", str(session_log), "--params", str(missing)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and " ".join(captured.err.split()) == f"error: {missing}: no such parameter file"
+    data = tmp_path / "notes.txt"
+    data.write_text("not a JSON document\n")
+    assert main(["sensors", str(session_log), "--json", str(data)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and str(data) in captured.err.replace("\n", "")
+    assert data.read_text() == "not a JSON document\n"
