@@ -34,7 +34,8 @@ from ..params import ModelParameters
 from . import render
 from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
-from .log_notice import warn_if_incomplete, warn_if_streams_fell_short, warn_if_uncalibrated
+from .log_notice import (warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_streams_fell_short,
+                         warn_if_uncalibrated)
 
 # The longest EM gap --max-gap may bridge, s. A slerp across a gap assumes the tip turned
 # steadily in between; a minute already spans twelve of the paper's 5 s steps and three
@@ -73,6 +74,8 @@ def run(args: argparse.Namespace) -> int:
     em, imu, metadata = load_sources(args.input, args.profile)
     choice, params = choose_parameters(args, em, metadata.get("bench", {}))
     log_damage = warn_if_incomplete(args.input)
+    # A --profile of another rig models that rig's mountings and gravity, as calibrate does.
+    profile_mismatch = warn_if_recorded_elsewhere(args.input, args.profile, em.profile)
     streams_short = warn_if_streams_fell_short(args.input)
     console = render.console_for(args)
     try:
@@ -87,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
         render.write_json(args.json, {
             "log": str(args.input), **agreement.as_dict(),
             "online_estimation": None if estimation is None else {"model": model_line, **estimation.as_dict()},
-            "log_damage": log_damage, "streams_below_rate": streams_short})
+            "log_damage": log_damage, "profile_mismatch": profile_mismatch, "streams_below_rate": streams_short})
     if args.report:
         from ..analysis.sensor_plots import write_sensor_report
 

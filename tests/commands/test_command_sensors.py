@@ -66,6 +66,7 @@ def test_sensors_compares_imu_with_em_and_both_estimators(session_log, tmp_path,
         pytest.approx(overall["rms_deg"] ** 2, rel=1e-6)  # heading and tilt split the error vector
     assert sum(per_axis["components"][axis]["rms_deg"] ** 2 for axis in "xyz") == \
         pytest.approx(overall["rms_deg"] ** 2, rel=1e-6)
+    assert figures["profile_mismatch"] is None
     estimation = figures["online_estimation"]
     assert estimation["steps"] == 3 * 5
     assert estimation["online_em"]["orientation_gain"] > 0.0
@@ -125,3 +126,14 @@ def test_a_missing_parameter_file_or_a_json_path_it_may_not_replace_is_refused_b
     captured = capsys.readouterr()
     assert captured.out == "" and str(data) in captured.err.replace("\n", "")
     assert data.read_text() == "not a JSON document\n"
+
+
+def test_a_profile_of_another_rig_than_the_log_embeds_is_said(session_log, tmp_path, capsys):
+    """As calibrate and replay say it: it was silent."""
+    out = tmp_path / "other.json"
+    assert main(["sensors", str(session_log), "--profile", "hydrojet-v1", "--json", str(out)]) in (0, 3)
+    warnings = " ".join(capsys.readouterr().err.split())
+    assert f"{session_log} embeds rig profile 'sim' and is read with 'hydrojet-v1' (--profile), whose gravity" \
+        in warnings
+    mismatch = json.loads(out.read_text())["profile_mismatch"]
+    assert (mismatch["recorded"], mismatch["used"]) == ("sim", "hydrojet-v1") and mismatch["message"] in warnings
