@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +25,7 @@ from ..analysis.sensors import (AXES, DEFAULT_MIN_HOLD_S, DEFAULT_SETTLE_S, METH
 from ..data.dataset import Dataset
 from ..errors import ConvergenceError, UserError
 from ..estimation import OnlineSettings
-from ..estimation.calibration import calibrate_dataset
+from ..estimation.calibration import CalibrationResult, calibrate_dataset
 from ..estimation.setup_warnings import calibration_warnings
 from ..logs import read_log
 from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log
@@ -34,8 +35,8 @@ from ..params import ModelParameters
 from . import render
 from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
-from .log_notice import (warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_streams_fell_short,
-                         warn_if_uncalibrated)
+from .log_notice import (warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_scored_on_own_fit,
+                         warn_if_streams_fell_short, warn_if_uncalibrated)
 
 # The longest EM gap --max-gap may bridge, s. A slerp across a gap assumes the tip turned
 # steadily in between; a minute already spans twelve of the paper's 5 s steps and three
@@ -83,13 +84,13 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as error:
         raise UserError(f"{args.input}: cannot align the IMU and EM samples: {error}") from None
     print_agreement(console, agreement, args.input)
-    estimation, model_line = estimate(args, choice, params, em, imu, console)
+    estimation = estimate(args, choice, params, em, imu, console)
     if estimation is not None:
-        print_estimation(console, estimation, model_line)
+        print_estimation(console, estimation)
     if args.json:
         render.write_json(args.json, {
             "log": str(args.input), **agreement.as_dict(),
-            "online_estimation": None if estimation is None else {"model": model_line, **estimation.as_dict()},
+            "online_estimation": None if estimation is None else estimation.as_dict(),
             "log_damage": log_damage, "profile_mismatch": profile_mismatch, "streams_below_rate": streams_short})
     if args.report:
         from ..analysis.sensor_plots import write_sensor_report
@@ -134,13 +135,31 @@ def choose_parameters(args: argparse.Namespace, em: Dataset,
     return choice, choice.parameters(em.profile.model_parameters())
 
 
+@dataclass(frozen=True)
+class Estimation:
+    """The online estimator fed by each source (``comparison``), the line naming the
+    model and its parameters (``model_line``), the own calibration on the EM
+    calibration poses (None with --params) and the notice when the steps scored are
+    the ones the parameters were fitted on (``training``: training errors)."""
+
+    comparison: EstimatorComparison
+    model_line: str
+    calibration: CalibrationResult | None
+    training: str | None
+
+    def as_dict(self) -> dict:
+        return {"model": self.model_line, "held_out": self.training is None, "training_notice": self.training,
+                **self.comparison.as_dict()}
+
+
 def estimate(args: argparse.Namespace, choice: ModelChoice, params: ModelParameters | None, em: Dataset,
-             imu: Dataset, console: Console) -> tuple[EstimatorComparison | None, str]:
+             imu: Dataset, console: Console) -> Estimation | None:
     """The online estimator fed by each source (None, with a note, when there is
-    nothing to calibrate on), and a line naming the model and its parameters.
-    ``params``: those of --params, else None to calibrate on the EM calibration poses."""
+    nothing to calibrate on). ``params``: those of --params, else None to calibrate on
+    the EM calibration poses."""
     em_steps, imu_steps = em.quasistatic_steps(), imu.quasistatic_steps()
     model = choice.model
+    calibration = None
     if params is not None:
         origin = f"parameters from {args.params}"
         warn_if_uncalibrated(choice)
@@ -149,7 +168,7 @@ def estimate(args: argparse.Namespace, choice: ModelChoice, params: ModelParamet
         if len(poses) == 0:
             console.print("[yellow]no EM calibration poses (sweep -1) in the log and no --params: "
                           "online estimation skipped[/]")
-            return None, ""
+            return None
         try:
             calibration = calibrate_dataset(model, poses, em.profile.model_parameters(), choice.calibration_names)
         except (ValueError, ConvergenceError) as error:
@@ -166,8 +185,12 @@ def estimate(args: argparse.Namespace, choice: ModelChoice, params: ModelParamet
         raise UserError(f"{args.input}: {error}") from None
     except ConvergenceError as error:
         raise UserError(f"{args.input}: {model.name} did not converge on a logged step: {error}") from None
+    # Without sweeps the steps scored are the calibration poses: those fitted, by this
+    # calibration or by the --params file's own on this log.
+    training = (warn_if_scored_on_own_fit(args.input, comparison.steps) if calibration is not None
+                else warn_if_fitted_on(choice, args.input, comparison.steps))
     effects = ", ".join(effect.name for effect in model.effects)
-    return comparison, f"{model.name} ({effects}); {origin}"
+    return Estimation(comparison, f"{model.name} ({effects}); {origin}", calibration, training)
 
 
 # --- console -------------------------------------------------------------------------
@@ -234,16 +257,19 @@ def print_agreement(console: Console, agreement: SensorAgreement, log: Path) -> 
     console.print(table)
 
 
-def print_estimation(console: Console, estimation: EstimatorComparison, model_line: str) -> None:
-    table = render.table(f"Online estimation fed by EM or by IMU, scored against EM ({len(estimation.steps)} "
-                         "settled steps)", labels=("method",),
+def print_estimation(console: Console, estimation: Estimation) -> None:
+    comparison = estimation.comparison
+    scored = f"{len(comparison.steps)} settled steps"
+    if estimation.training is not None:
+        scored += ", the calibration poses fitted: training errors, not held-out ones"
+    table = render.table(f"Online estimation fed by EM or by IMU, scored against EM ({scored})", labels=("method",),
                          numbers=("orient. RMSE (deg)", "gain", "pos. RMSE (mm)", "gain"),
-                         caption=f"{model_line}; gain: cut in RMS error from Ref. (constant disturbance)")
+                         caption=f"{estimation.model_line}; gain: cut in RMS error from Ref. (constant disturbance)")
     for method in METHODS:
-        summary = estimation.results[method].overall
+        summary = comparison.results[method].overall
         gain = position_gain = None
         if method != "ref":
-            gain, position_gain = estimation.gain(method), estimation.position_gain(method)
+            gain, position_gain = comparison.gain(method), comparison.position_gain(method)
         table.add_row(SHORT_LABELS[method], _deg(summary.orientation_rmse_deg),
                       "-" if gain is None else f"{gain:+.0%}",
                       "-" if summary.position_rmse_mm is None else f"{summary.position_rmse_mm:.2f}",

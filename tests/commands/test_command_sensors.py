@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import asyncio
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 from msgspec.structs import replace
 
 from hydrojet_bench.bench.session import Session, SessionRequest
@@ -42,6 +44,24 @@ def session_log(tmp_path_factory):
     return log_path
 
 
+def cut_after_calibration(log: Path, destination: Path) -> Path:
+    """A copy of ``log`` cut inside the first chunk after its last calibration pose's
+    /bench/step record: a session stopped before its sweeps finished a step."""
+    with log.open("rb") as handle:
+        reader = make_reader(handle)
+        last_pose = max(message.log_time for _, _, message in reader.iter_messages(topics=["/bench/step"])
+                        if json.loads(message.data)["sweep"] == -1)
+        chunk = next(index for index in reader.get_summary().chunk_indexes if index.message_start_time > last_pose)
+    destination.write_bytes(log.read_bytes()[:chunk.chunk_start_offset + chunk.chunk_length // 2])
+    return destination
+
+
+@pytest.fixture(scope="module")
+def poses_log(session_log, tmp_path_factory):
+    """The session stopped after its calibration poses: no sweeps."""
+    return cut_after_calibration(session_log, tmp_path_factory.mktemp("poses") / "poses.mcap")
+
+
 def test_sensors_compares_imu_with_em_and_both_estimators(session_log, tmp_path, capsys):
     out, report = tmp_path / "sensors.json", tmp_path / "report"
     assert main(["sensors", str(session_log), "--min-hold", "2", "--settle", "0.5", "--json", str(out),
@@ -69,6 +89,7 @@ def test_sensors_compares_imu_with_em_and_both_estimators(session_log, tmp_path,
     assert figures["profile_mismatch"] is None
     estimation = figures["online_estimation"]
     assert estimation["steps"] == 3 * 5
+    assert estimation["held_out"] is True and estimation["training_notice"] is None  # the sweeps were not fitted
     assert estimation["online_em"]["orientation_gain"] > 0.0
     assert np.isfinite(estimation["online_imu"]["orientation_rmse_deg"])
     assert sorted(path.name for path in report.iterdir()) == ["angle_vs_time.png", "histogram.png", "per_axis.png",
@@ -137,3 +158,29 @@ def test_a_profile_of_another_rig_than_the_log_embeds_is_said(session_log, tmp_p
         in warnings
     mismatch = json.loads(out.read_text())["profile_mismatch"]
     assert (mismatch["recorded"], mismatch["used"]) == ("sim", "hydrojet-v1") and mismatch["message"] in warnings
+
+
+def test_scoring_the_poses_fitted_says_the_errors_are_training_errors(session_log, poses_log, tmp_path, capsys):
+    """Without sweeps the steps scored are the calibration poses: the ones sensors' own
+    calibration fitted, or a parameter file calibrated on this log; both were scored
+    silently as if held out."""
+    out = tmp_path / "poses.json"
+    assert main(["sensors", str(poses_log), "--min-hold", "2", "--settle", "0.5", "--json", str(out)]) in (0, 3)
+    captured = capsys.readouterr()
+    warnings, console = " ".join(captured.err.split()), " ".join(captured.out.split())
+    assert (f"the model was calibrated here on the calibration poses of {poses_log}: it has no sweeps (sweep >= 0), "
+            "so the steps compared are the calibration poses fitted, so these are training errors, not held-out "
+            "ones") in warnings
+    assert f"({POSES} settled steps, the calibration poses fitted: training errors, not held-out ones)" in console
+    estimation = json.loads(out.read_text())["online_estimation"]
+    assert estimation["steps"] == POSES and estimation["held_out"] is False
+    assert estimation["training_notice"] in warnings
+
+    fitted = tmp_path / "all.toml"
+    assert main(["calibrate", str(session_log), "--fit-on", "all", "-o", str(fitted)]) in (0, 3)
+    capsys.readouterr()
+    assert main(["sensors", str(session_log), "--params", str(fitted), "--json", str(out)]) == 0
+    warnings = " ".join(capsys.readouterr().err.split())
+    assert (f"{fitted} was calibrated on {session_log} (fit_on all): the sweep steps compared were fitted, so these "
+            "are training errors, not held-out ones") in warnings
+    assert json.loads(out.read_text())["online_estimation"]["held_out"] is False
