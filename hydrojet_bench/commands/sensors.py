@@ -33,6 +33,7 @@ from ..logs.topics import Sample
 from ..model_choice import ModelChoice, ModelDefaults, model_choice
 from ..params import ModelParameters
 from . import render
+from .calibrate import UNTRUSTED, calibration_exit_code
 from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
 from .log_notice import (warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_scored_on_own_fit,
@@ -64,6 +65,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     render.add_json_argument(parser)
     parser.add_argument("--report", type=Path, metavar="DIR", help="write figures to this folder")
     add_format_argument(parser)
+    render.add_exit_codes(parser, {UNTRUSTED: "its own calibration (no --params) did not converge or left a value "
+                                              "on a bound: the estimation figures are of untrusted parameters"})
     parser.set_defaults(func=run)
 
 
@@ -97,7 +100,8 @@ def run(args: argparse.Namespace) -> int:
 
         for path in write_sensor_report(args.report, agreement, args.figure_format):
             console.print(f"wrote {render.plain(path)}")
-    return 0
+    # As calibrate and replay: figures of parameters whose fit is not to be trusted.
+    return calibration_exit_code(None if estimation is None else estimation.calibration)
 
 
 def check_options(args: argparse.Namespace) -> None:
@@ -148,8 +152,19 @@ class Estimation:
     training: str | None
 
     def as_dict(self) -> dict:
-        return {"model": self.model_line, "held_out": self.training is None, "training_notice": self.training,
-                **self.comparison.as_dict()}
+        return {"model": self.model_line, "calibration": calibration_figures(self.calibration),
+                "held_out": self.training is None, "training_notice": self.training, **self.comparison.as_dict()}
+
+
+def calibration_figures(result: CalibrationResult | None) -> dict | None:
+    """The own calibration for the JSON document, with the keys replay writes: whether
+    it converged (and why, in words) and the values on a bound; None with --params."""
+    if result is None:
+        return None
+    return {"poses": result.poses, "rms_orientation_deg_before": result.rms_orientation_deg_before,
+            "rms_orientation_deg_after": result.rms_orientation_deg_after,
+            "parameters": dict(zip(result.names, map(float, result.values))), "converged": result.converged,
+            "convergence": result.convergence, "at_bound": list(result.at_bound)}
 
 
 def estimate(args: argparse.Namespace, choice: ModelChoice, params: ModelParameters | None, em: Dataset,

@@ -4,6 +4,7 @@ byte-level emulators, Madgwick-fused IMUs), and its one-line errors."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import json
 from pathlib import Path
 
@@ -14,6 +15,8 @@ from msgspec.structs import replace
 
 from hydrojet_bench.bench.session import Session, SessionRequest
 from hydrojet_bench.cli import main
+from hydrojet_bench.commands import sensors
+from hydrojet_bench.estimation.calibration import calibrate_dataset
 from hydrojet_bench.model_choice import build_model
 from hydrojet_bench.logs import LogWriter
 from hydrojet_bench.logs.topics import Sample
@@ -64,8 +67,8 @@ def poses_log(session_log, tmp_path_factory):
 
 def test_sensors_compares_imu_with_em_and_both_estimators(session_log, tmp_path, capsys):
     out, report = tmp_path / "sensors.json", tmp_path / "report"
-    assert main(["sensors", str(session_log), "--min-hold", "2", "--settle", "0.5", "--json", str(out),
-                 "--report", str(report)]) == 0
+    code = main(["sensors", str(session_log), "--min-hold", "2", "--settle", "0.5", "--json", str(out),
+                 "--report", str(report)])
     console = capsys.readouterr().out
     for title in ("IMU against EM", "Per-axis error", "Static accuracy", "Proposed, fed by IMU"):
         assert title in console
@@ -90,6 +93,10 @@ def test_sensors_compares_imu_with_em_and_both_estimators(session_log, tmp_path,
     estimation = figures["online_estimation"]
     assert estimation["steps"] == 3 * 5
     assert estimation["held_out"] is True and estimation["training_notice"] is None  # the sweeps were not fitted
+    # Six poses for nine parameters: whether that fit converges is the data's business;
+    # the exit code must say which (3: the figures rest on an untrusted fit).
+    calibration = estimation["calibration"]
+    assert code == (0 if calibration["converged"] and not calibration["at_bound"] else 3)
     assert estimation["online_em"]["orientation_gain"] > 0.0
     assert np.isfinite(estimation["online_imu"]["orientation_rmse_deg"])
     assert sorted(path.name for path in report.iterdir()) == ["angle_vs_time.png", "histogram.png", "per_axis.png",
@@ -184,3 +191,25 @@ def test_scoring_the_poses_fitted_says_the_errors_are_training_errors(session_lo
     assert (f"{fitted} was calibrated on {session_log} (fit_on all): the sweep steps compared were fitted, so these "
             "are training errors, not held-out ones") in warnings
     assert json.loads(out.read_text())["online_estimation"]["held_out"] is False
+
+
+def test_an_unconverged_own_calibration_exits_3_as_calibrate_and_replay_do(session_log, tmp_path, capsys,
+                                                                         monkeypatch):
+    """It warned that the fit was NOT converged and exited 0, the code of a right answer.
+    Which fits fail to converge depends on the data, so the fit's verdict is forced."""
+    def unconverged(*args, **kwargs):
+        return dataclasses.replace(calibrate_dataset(*args, **kwargs), converged=False)
+
+    out = tmp_path / "unconverged.json"
+    monkeypatch.setattr(sensors, "calibrate_dataset", unconverged)
+    assert main(["sensors", str(session_log), "--json", str(out)]) == 3
+    assert "NOT converged" in capsys.readouterr().err
+    calibration = json.loads(out.read_text())["online_estimation"]["calibration"]
+    assert calibration["converged"] is False and calibration["convergence"].startswith("NOT converged")
+    assert calibration["poses"] == POSES
+    # With --params there is no fit of its own to distrust.
+    params = tmp_path / "p.toml"
+    monkeypatch.undo()
+    assert main(["calibrate", str(session_log), "-o", str(params)]) in (0, 3)
+    assert main(["sensors", str(session_log), "--params", str(params), "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["online_estimation"]["calibration"] is None
