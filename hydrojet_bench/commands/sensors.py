@@ -28,7 +28,7 @@ from ..estimation import OnlineSettings
 from ..estimation.calibration import CalibrationResult, calibrate_dataset
 from ..estimation.setup_warnings import calibration_warnings
 from ..logs import read_log
-from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log
+from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log, empty_note
 from ..logs.topics import Sample
 from ..model_choice import ModelChoice, ModelDefaults, model_choice
 from ..params import ModelParameters
@@ -122,10 +122,28 @@ def load_sources(log: Path, profile: str | None) -> tuple[Dataset, Dataset, dict
     sources = {sample.source for sample in contents.on(Sample)}
     for source, what in (("imu", "IMU"), ("em", "EM tracker")):
         if source not in sources:
-            raise UserError(f"{log}: no {what} samples ({SAMPLE_TOPIC} with source {source!r}); `sensors` needs a "
-                            "session recorded with both the IMUs and the EM tracker")
+            raise UserError(missing_source(log, what, source, sources, contents.truncated))
     em = dataset_from_log(log, profile, source="em")
     return em, dataset_from_log(log, imu_profile(em.profile), source="imu"), contents.metadata
+
+
+def missing_source(log: Path, what: str, source: str, sources: set[str], truncated: bool) -> str:
+    """Why ``log``, whose samples come from ``sources``, has none from ``source``
+    (``what``, in words), in one line: an empty file, a log cut before its first sample,
+    or a session recorded without that device."""
+    if empty_note(log):
+        return (f"{log}: the file is empty (0 bytes): no session log (its session stopped before writing anything, "
+                "or it was never written)")
+    cut = " (the session was stopped, or the file was cut)"
+    if not sources:
+        if truncated:
+            return f"{log}: no {SAMPLE_TOPIC} samples at all: the log is truncated before its first one{cut}"
+        return (f"{log}: no {SAMPLE_TOPIC} samples at all; `sensors` needs a session recorded with both the IMUs "
+                "and the EM tracker")
+    lacking = f"{log}: no {what} samples ({SAMPLE_TOPIC} with source {source!r}), only {', '.join(sorted(sources))}"
+    if truncated:
+        return f"{lacking}: the log is truncated{cut}, and `sensors` needs both the IMUs and the EM tracker"
+    return f"{lacking}; `sensors` needs a session recorded with both the IMUs and the EM tracker"
 
 
 def choose_parameters(args: argparse.Namespace, em: Dataset,

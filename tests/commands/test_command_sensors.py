@@ -18,7 +18,7 @@ from hydrojet_bench.cli import main
 from hydrojet_bench.commands import sensors
 from hydrojet_bench.estimation.calibration import calibrate_dataset
 from hydrojet_bench.model_choice import build_model
-from hydrojet_bench.logs import LogWriter
+from hydrojet_bench.logs import LogWriter, read_log
 from hydrojet_bench.logs.topics import Sample
 from hydrojet_bench.plans import calibration_plan, validation_sweeps
 from hydrojet_bench.profile import load_profile
@@ -47,16 +47,28 @@ def session_log(tmp_path_factory):
     return log_path
 
 
-def cut_after_calibration(log: Path, destination: Path) -> Path:
-    """A copy of ``log`` cut inside the first chunk after its last calibration pose's
-    /bench/step record: a session stopped before its sweeps finished a step."""
+def cut_after(log: Path, destination: Path, last_kept_ns: int) -> Path:
+    """A copy of ``log`` cut inside its first chunk that starts after log time
+    ``last_kept_ns``: the messages of the chunks before are kept whole, as a crash while
+    writing that chunk leaves them."""
     with log.open("rb") as handle:
-        reader = make_reader(handle)
-        last_pose = max(message.log_time for _, _, message in reader.iter_messages(topics=["/bench/step"])
-                        if json.loads(message.data)["sweep"] == -1)
-        chunk = next(index for index in reader.get_summary().chunk_indexes if index.message_start_time > last_pose)
+        indexes = make_reader(handle).get_summary().chunk_indexes
+    chunk = next(index for index in indexes if index.message_start_time > last_kept_ns)
     destination.write_bytes(log.read_bytes()[:chunk.chunk_start_offset + chunk.chunk_length // 2])
     return destination
+
+
+def log_times(log: Path, topic: str, keep=lambda record: True) -> list[int]:
+    """The log times (ns) of the messages on ``topic`` whose JSON ``keep`` accepts."""
+    with log.open("rb") as handle:
+        return [message.log_time for _, _, message in make_reader(handle).iter_messages(topics=[topic])
+                if keep(json.loads(message.data))]
+
+
+def cut_after_calibration(log: Path, destination: Path) -> Path:
+    """A copy of ``log`` cut after its last calibration pose's /bench/step record: a
+    session stopped before its sweeps finished a step."""
+    return cut_after(log, destination, max(log_times(log, "/bench/step", lambda step: step["sweep"] == -1)))
 
 
 @pytest.fixture(scope="module")
@@ -213,3 +225,28 @@ def test_an_unconverged_own_calibration_exits_3_as_calibrate_and_replay_do(sessi
     assert main(["calibrate", str(session_log), "-o", str(params)]) in (0, 3)
     assert main(["sensors", str(session_log), "--params", str(params), "--json", str(out)]) == 0
     assert json.loads(out.read_text())["online_estimation"]["calibration"] is None
+
+
+def test_a_cut_or_empty_log_says_what_it_lacks_and_that_it_was_cut(session_log, tmp_path, capsys):
+    """A log cut while the first step settled said "no samples from source 'em': it has
+    samples from em, imu only", and one cut before any sample, or an empty file, that
+    the session had no IMUs."""
+    def error(log: Path) -> str:
+        assert main(["sensors", str(log)]) == 2
+        return " ".join(capsys.readouterr().err.split()).rpartition("error: ")[2]
+
+    empty = tmp_path / "empty.mcap"
+    empty.touch()
+    assert error(empty) == (f"{empty}: the file is empty (0 bytes): no session log (its session stopped before "
+                            "writing anything, or it was never written)")
+    # The setup checks come first and record no samples.
+    early = cut_after(session_log, tmp_path / "early.mcap", 0)
+    assert error(early) == (f"{early}: no /bench/sample samples at all: the log is truncated before its first one "
+                            "(the session was stopped, or the file was cut)")
+    # Cut once both sources have samples, while the first pose settles (3 s).
+    first = max(min(log_times(session_log, "/bench/sample", lambda sample: sample["source"] == source))
+                for source in ("em", "imu"))
+    settling = cut_after(session_log, tmp_path / "settling.mcap", first)
+    em = sum(sample.source == "em" for sample in read_log(settling, topics=["/bench/sample"]).on(Sample))
+    assert error(settling) == (f"{settling}: no /bench/sample samples from source 'em' in a finished step: all {em} "
+                               "lie in the step the cut interrupted, which did not finish (the log is truncated)")
