@@ -19,17 +19,17 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 
-from ..analysis.sensors import (AXES, DEFAULT_MIN_HOLD_S, DEFAULT_SETTLE_S, METHODS, AngleSummary,
-                                EstimatorComparison, SensorAgreement, compare_estimators, hold_label,
-                                imu_profile, sensor_agreement)
+from ..analysis.sensors import (AXES, DEFAULT_MIN_HOLD_S, DEFAULT_SETTLE_S, FRAME_RULE, METHODS,
+                                AlignedOrientations, AngleSummary, EstimatorComparison, SensorAgreement,
+                                compare_estimators, hold_label, imu_profile, sensor_agreement)
 from ..data.dataset import Dataset
 from ..errors import ConvergenceError, UserError
 from ..estimation import OnlineSettings
 from ..estimation.calibration import CalibrationResult, calibrate_dataset
 from ..estimation.setup_warnings import calibration_warnings
 from ..logs import read_log
-from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log, empty_note
-from ..logs.topics import Sample
+from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log, em_frame_numbers, empty_note
+from ..logs.topics import EmFrame, Sample
 from ..model_choice import ModelChoice, ModelDefaults, model_choice
 from ..params import ModelParameters
 from . import render
@@ -60,8 +60,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--settle", type=float, default=DEFAULT_SETTLE_S, metavar="S",
                         help=f"ignore the first S seconds of each hold (default {DEFAULT_SETTLE_S:g} s)")
     parser.add_argument("--max-gap", type=float, metavar="S",
-                        help="largest EM gap to interpolate across, at most "
-                             f"{MAX_GAP_LIMIT_S:g} s (default: 1.5 EM periods)")
+                        help="largest interval between EM samples to interpolate across, at most "
+                             f"{MAX_GAP_LIMIT_S:g} s (default: any without a tracker frame lost, from the frame "
+                             "numbers the log records; 1.5 EM periods in a log without them)")
     render.add_json_argument(parser)
     parser.add_argument("--report", type=Path, metavar="DIR", help="write figures to this folder")
     add_format_argument(parser)
@@ -75,15 +76,16 @@ def run(args: argparse.Namespace) -> int:
     # Every input and output is checked before the analysis, whose tables would
     # otherwise be printed in full above the one line that refuses them.
     render.check_json_output(args.json)
-    em, imu, metadata = load_sources(args.input, args.profile)
-    choice, params = choose_parameters(args, em, metadata.get("bench", {}))
+    sources = load_sources(args.input, args.profile)
+    em, imu = sources.em, sources.imu
+    choice, params = choose_parameters(args, em, sources.metadata.get("bench", {}))
     log_damage = warn_if_incomplete(args.input)
     # A --profile of another rig models that rig's mountings and gravity, as calibrate does.
     profile_mismatch = warn_if_recorded_elsewhere(args.input, args.profile, em.profile)
     streams_short = warn_if_streams_fell_short(args.input)
     console = render.console_for(args)
     try:
-        agreement = sensor_agreement(imu, em, args.max_gap, args.min_hold, args.settle)
+        agreement = sensor_agreement(imu, em, args.max_gap, args.min_hold, args.settle, sources.em_frames)
     except ValueError as error:
         raise UserError(f"{args.input}: cannot align the IMU and EM samples: {error}") from None
     print_agreement(console, agreement, args.input)
@@ -115,16 +117,29 @@ def check_options(args: argparse.Namespace) -> None:
                         f"steps), got {args.max_gap}")
 
 
-def load_sources(log: Path, profile: str | None) -> tuple[Dataset, Dataset, dict]:
-    """The log's EM samples, its IMU samples (with the IMU earth frame's gravity) and its
-    metadata. A log without IMU samples is a `UserError` that says so."""
-    contents = read_log(log, topics=[SAMPLE_TOPIC])
+@dataclass(frozen=True)
+class Sources:
+    """A session log's EM samples, its IMU samples (with the IMU earth frame's gravity,
+    `imu_profile`), the tracker frame number of each EM sample (None if the log does
+    not say) and the log's metadata."""
+
+    em: Dataset
+    imu: Dataset
+    em_frames: np.ndarray | None
+    metadata: dict
+
+
+def load_sources(log: Path, profile: str | None) -> Sources:
+    """The log's samples (`Sources`). A log without samples of both sources is a
+    `UserError` that says what it lacks."""
+    contents = read_log(log, topics=[SAMPLE_TOPIC, EmFrame.topic])
     sources = {sample.source for sample in contents.on(Sample)}
     for source, what in (("imu", "IMU"), ("em", "EM tracker")):
         if source not in sources:
             raise UserError(missing_source(log, what, source, sources, contents.truncated))
     em = dataset_from_log(log, profile, source="em")
-    return em, dataset_from_log(log, imu_profile(em.profile), source="imu"), contents.metadata
+    return Sources(em, dataset_from_log(log, imu_profile(em.profile), source="imu"),
+                   em_frame_numbers(contents, em.time_s), contents.metadata)
 
 
 def missing_source(log: Path, what: str, source: str, sources: set[str], truncated: bool) -> str:
@@ -237,14 +252,22 @@ def _hz(rate: float | None) -> str:
     return "-" if rate is None else f"{rate:.1f} Hz"
 
 
+def _bridging(aligned: AlignedOrientations) -> str:
+    """How the EM samples were slerped to the IMU stamps, and what made a gap."""
+    if aligned.gap_rule == FRAME_RULE:
+        return (f"slerped to the IMU stamps between EM samples of consecutive tracker frames (intervals up to "
+                f"{aligned.max_gap_s * 1e3:.0f} ms; a gap: a tracker frame lost)")
+    return f"slerped to the IMU stamps across intervals up to {aligned.max_gap_s * 1e3:.0f} ms"
+
+
 def print_agreement(console: Console, agreement: SensorAgreement, log: Path) -> None:
     aligned, axes = agreement.aligned, agreement.axes
     table = render.table(
         f"IMU against EM: tip orientation in the base frame, {log}", labels=("samples",),
         numbers=("n", "RMS (deg)", "mean (deg)", "max (deg)"),
         caption=f"{len(aligned)} of {aligned.imu_samples} IMU samples ({_hz(aligned.imu_rate_hz)}) aligned "
-                f"with {aligned.em_samples} EM samples ({_hz(aligned.em_rate_hz)}), slerped to the IMU "
-                f"stamps across gaps up to {aligned.max_gap_s * 1e3:.0f} ms; held: settled part of holds "
+                f"with {aligned.em_samples} EM samples ({_hz(aligned.em_rate_hz)}), {_bridging(aligned)}; "
+                f"dropped: {aligned.dropped.describe()}; held: settled part of holds "
                 f"of >= {agreement.min_hold_s:g} s after {agreement.settle_s:g} s")
 
     def row(label: str, summary: AngleSummary | None) -> None:

@@ -19,8 +19,8 @@ import numpy as np
 from ..data.dataset import Dataset, SampleFlag, saturation_flags
 from ..errors import UserError
 from ..profile import RigProfile, load_profile, profile_from_mapping
-from .reader import read_log
-from .topics import Sample, Step
+from .reader import LogContents, read_log
+from .topics import EmFrame, Sample, Step
 
 SAMPLE_TOPIC = Sample.topic
 
@@ -78,6 +78,21 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
         )
     except ValueError as error:
         raise UserError(f"{path}: {SAMPLE_TOPIC} ({source}): {error}") from None
+
+
+def em_frame_numbers(contents: LogContents, time_s: np.ndarray) -> np.ndarray | None:
+    """The tracker frame number of each EM sample at session times ``time_s`` (s; rows
+    of a `dataset_from_log` of ``contents``' log): the ``/em/frame`` record the bench wrote
+    at the same time (it stamps a frame and its sample alike). None when the log does not
+    say for every sample (read without /em/frame, written by an earlier version, or the
+    frame's chunk damaged away) or two frames share a stamp."""
+    frames: dict[float, int | None] = {}
+    for frame in contents.on(EmFrame):
+        frames[frame.t_s] = None if frame.t_s in frames else frame.frame_number
+    numbers = [frames.get(t_s) for t_s in np.asarray(time_s, dtype=float).tolist()]
+    if not numbers or None in numbers:
+        return None
+    return np.array(numbers, dtype=np.int64)
 
 
 def no_samples_message(path: Path, samples: list[Sample], source: str, finished_steps: int, truncated: bool) -> str:
