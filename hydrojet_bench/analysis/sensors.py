@@ -7,9 +7,16 @@ removed (`Dataset.tip_orientation_in_base`), does not depend on that frame, so t
 two are compared directly.
 
 Alignment: the EM tip-in-base orientation is interpolated to each IMU stamp by slerp
-between the two EM samples around it, and only where those are at most ``max_gap_s``
-apart (default: 1.5 median EM periods, so a lost tracker frame is never bridged). IMU
-stamps outside the EM record are dropped.
+between the two EM samples around it, unless a gap separates them: a tracker frame lost
+between them (or its pose unusable), so that the tip's motion there is unseen. Gaps are
+judged on the tracker's own frame counter when the EM samples come with it: two samples
+are a gap when their frame numbers are further apart than 1.5 median steps (one
+lost frame at the tracker's full rate). The host stamps a frame when it receives it, and
+those stamps jitter (1.7-60 ms apart for a 25 ms period on a simulated rig at x25,
+without a frame lost), which a rule on the stamps took for gaps. Without frame numbers,
+or with ``max_gap_s`` given, the stamps decide: at most ``max_gap_s`` apart (default:
+1.5 median EM periods). IMU stamps before the first or after the last EM sample are
+dropped too; `AlignedOrientations.dropped` counts each reason.
 
 Error of one aligned sample: the rotation ``q_imu * conj(q_em)`` that takes the EM
 orientation onto the IMU's, as a rotation vector in the base (clamp) frame, degrees.
@@ -52,9 +59,12 @@ from .compare import Comparison, compare, compare_methods
 
 # Gravity in the fusion filter's earth frame (z up), m/s^2 (drivers/imu/fusion.py).
 IMU_EARTH_GRAVITY_M_S2 = (0.0, 0.0, -9.81)
-# EM samples further apart than this many median EM periods are not interpolated across:
-# one lost frame (two periods) is a gap.
+# EM samples further apart than this many median EM periods (or median steps of the
+# tracker's frame number) are not interpolated across: one lost frame (two) is a gap.
 MAX_GAP_PERIODS = 1.5
+# How `align` judged the gaps: on the tracker's frame numbers, or on the EM stamps.
+FRAME_RULE = "tracker frame numbers"
+TIME_RULE = "EM sample times"
 # A command held this long (s) counts as a static pose.
 DEFAULT_MIN_HOLD_S = 10.0
 # Settled samples of a hold start this long (s) after its command: five settling time
@@ -83,6 +93,33 @@ def slerp(start: np.ndarray, end: np.ndarray, fraction: np.ndarray) -> np.ndarra
 
 
 @dataclass(frozen=True)
+class DroppedSamples:
+    """Valid IMU samples `align` left out, by reason: before the first EM sample, after
+    the last, and inside a gap between two EM samples (``em_gaps``: how many gaps)."""
+
+    before_em: int
+    after_em: int
+    in_em_gaps: int
+    em_gaps: int
+
+    @property
+    def total(self) -> int:
+        return self.before_em + self.after_em + self.in_em_gaps
+
+    def describe(self) -> str:
+        """One clause, e.g. "12 before the first EM sample, 290 in 18 EM gaps"."""
+        parts = [f"{self.before_em} before the first EM sample" if self.before_em else "",
+                 f"{self.after_em} after the last" if self.after_em else "",
+                 f"{self.in_em_gaps} in {self.em_gaps} EM gap{'s' if self.em_gaps != 1 else ''}"
+                 if self.in_em_gaps else ""]
+        return ", ".join(part for part in parts if part) or "none"
+
+    def as_dict(self) -> dict:
+        return {"before_em": self.before_em, "after_em": self.after_em, "in_em_gaps": self.in_em_gaps,
+                "em_gaps": self.em_gaps}
+
+
+@dataclass(frozen=True)
 class AlignedOrientations:
     """IMU and EM tip orientations in the base frame (mountings removed) at the IMU
     stamps where both are known. M rows.
@@ -90,10 +127,13 @@ class AlignedOrientations:
     time_s: (M,) IMU stamps, s. imu, em: (M, 4) unit quaternions (w, x, y, z), tip frame
     -> base frame; em interpolated by slerp. up_in_base: (M, 3) unit vector against
     gravity in the base frame, from the EM base sensor. jet_forces_n (M, 3), sweep (M,),
-    step (M,): the IMU samples' labels. max_gap_s: the largest EM gap interpolated
-    across, s. imu_samples, em_samples: valid samples of each source before alignment;
-    imu_rate_hz, em_rate_hz: their mean rates (a host that cannot keep up samples the
-    IMUs slower than configured, and the filters then miss motion between samples).
+    step (M,): the IMU samples' labels. gap_rule: what judged the EM gaps (`FRAME_RULE`
+    or `TIME_RULE`). max_gap_s: the largest EM interval interpolated across, s (the
+    limit under `TIME_RULE`, the longest bridged under `FRAME_RULE`). dropped: the valid
+    IMU samples left out, by reason. imu_samples, em_samples: valid samples of each
+    source before alignment; imu_rate_hz, em_rate_hz: their mean rates (a host that
+    cannot keep up samples the IMUs slower than configured, and the filters then miss
+    motion between samples).
     """
 
     time_s: np.ndarray
@@ -103,7 +143,9 @@ class AlignedOrientations:
     jet_forces_n: np.ndarray
     sweep: np.ndarray
     step: np.ndarray
+    gap_rule: str
     max_gap_s: float
+    dropped: DroppedSamples
     imu_samples: int
     em_samples: int
     imu_rate_hz: float | None
@@ -113,26 +155,52 @@ class AlignedOrientations:
         return len(self.time_s)
 
 
-def align(imu: Dataset, em: Dataset, max_gap_s: float | None = None) -> AlignedOrientations:
+def bridged_intervals(em_time_s: np.ndarray, max_gap_s: float | None = None,
+                      em_frames: np.ndarray | None = None) -> tuple[np.ndarray, str, float]:
+    """Which intervals between consecutive EM samples (stamps ``em_time_s``, s, n of
+    them) may be interpolated across: (n - 1,) booleans, the rule that said so and the
+    longest interval it allows, s. ``em_frames``: the samples' tracker frame numbers,
+    which decide unless ``max_gap_s`` (s) is given (see the module docstring). Raises
+    ValueError if the rule needs a median EM period and there are not two stamps."""
+    intervals = np.diff(em_time_s)
+    if max_gap_s is None and em_frames is not None and len(em_frames) > 1:
+        steps = np.diff(np.asarray(em_frames, dtype=np.int64))
+        forward = steps[steps > 0]
+        limit = MAX_GAP_PERIODS * float(np.median(forward)) if len(forward) else 0.0
+        # A step back is a tracker that restarted its count: nothing says what was lost.
+        bridged = (steps > 0) & (steps <= limit)
+        return bridged, FRAME_RULE, float(intervals[bridged].max()) if bridged.any() else 0.0
+    if max_gap_s is None:
+        periods = intervals[intervals > 0.0]
+        if len(periods) == 0:
+            raise ValueError("fewer than two EM sample times: give max_gap_s")
+        max_gap_s = MAX_GAP_PERIODS * float(np.median(periods))
+    return intervals <= max_gap_s, TIME_RULE, float(max_gap_s)
+
+
+def align(imu: Dataset, em: Dataset, max_gap_s: float | None = None,
+          em_frames: np.ndarray | None = None) -> AlignedOrientations:
     """The valid IMU samples with the EM orientation slerped to their stamps (see the
-    module docstring). Raises ValueError if a source has no valid sample or fewer than two
-    EM samples to derive a period from when ``max_gap_s`` is None."""
+    module docstring). ``em_frames``: the tracker frame number of each row of ``em``
+    (None: not known). Raises ValueError if a source has no valid sample or the gap rule
+    needs an EM period that fewer than two EM samples cannot give."""
+    if em_frames is not None:
+        em_frames = np.asarray(em_frames)[em.valid_mask()]
     imu, em = imu.valid_rows(), em.valid_rows()
     if len(imu) == 0 or len(em) == 0:
         raise ValueError(f"no valid {'IMU' if len(imu) == 0 else 'EM'} samples to align")
     em_time = em.time_s
-    if max_gap_s is None:
-        periods = np.diff(em_time)
-        periods = periods[periods > 0.0]
-        if len(periods) == 0:
-            raise ValueError("fewer than two EM sample times: give max_gap_s")
-        max_gap_s = MAX_GAP_PERIODS * float(np.median(periods))
+    bridged, rule, max_gap_s = bridged_intervals(em_time, max_gap_s, em_frames)
     lower = np.searchsorted(em_time, imu.time_s, side="right") - 1  # last EM sample at or before
+    before, after = lower < 0, imu.time_s > em_time[-1]
     upper = np.minimum(lower + 1, len(em) - 1)
     lower_safe = np.maximum(lower, 0)
-    gap = em_time[upper] - em_time[lower_safe]
-    inside = (lower >= 0) & (imu.time_s <= em_time[upper]) & (gap <= max_gap_s)
-    lower, upper, gap = lower_safe[inside], upper[inside], gap[inside]
+    # A stamp on the last EM sample needs no interval; any other, the one it lies in.
+    in_gap = ~before & ~after & (lower < len(em) - 1) & ~np.append(bridged, True)[lower_safe]
+    inside = ~before & ~after & ~in_gap
+    dropped = DroppedSamples(int(before.sum()), int(after.sum()), int(in_gap.sum()), int((~bridged).sum()))
+    lower, upper = lower_safe[inside], upper[inside]
+    gap = em_time[upper] - em_time[lower]
     time = imu.time_s[inside]
     fraction = np.divide(time - em_time[lower], gap, out=np.zeros(len(time)), where=gap > 0.0)
     em_tip = em.tip_orientation_in_base()
@@ -140,9 +208,9 @@ def align(imu: Dataset, em: Dataset, max_gap_s: float | None = None) -> AlignedO
     return AlignedOrientations(
         time_s=time, imu=imu.tip_orientation_in_base()[inside], em=slerp(em_tip[lower], em_tip[upper], fraction),
         up_in_base=-gravity / np.linalg.norm(gravity, axis=1, keepdims=True),
-        jet_forces_n=imu.jet_forces_n[inside], sweep=imu.sweep[inside], step=imu.step[inside],
-        max_gap_s=float(max_gap_s), imu_samples=len(imu), em_samples=len(em), imu_rate_hz=mean_rate_hz(imu.time_s),
-        em_rate_hz=mean_rate_hz(em_time))
+        jet_forces_n=imu.jet_forces_n[inside], sweep=imu.sweep[inside], step=imu.step[inside], gap_rule=rule,
+        max_gap_s=max_gap_s, dropped=dropped, imu_samples=len(imu), em_samples=len(em),
+        imu_rate_hz=mean_rate_hz(imu.time_s), em_rate_hz=mean_rate_hz(em_time))
 
 
 def mean_rate_hz(time_s: np.ndarray) -> float | None:
@@ -329,8 +397,9 @@ class SensorAgreement:
 
         return {
             "alignment": {"method": "EM slerped to the IMU stamps between the EM samples around each",
-                          "max_gap_s": aligned.max_gap_s, "imu_samples": aligned.imu_samples,
-                          "em_samples": aligned.em_samples, "aligned_samples": len(aligned),
+                          "gap_rule": aligned.gap_rule, "max_gap_s": aligned.max_gap_s,
+                          "imu_samples": aligned.imu_samples, "em_samples": aligned.em_samples,
+                          "aligned_samples": len(aligned), "dropped": aligned.dropped.as_dict(),
                           "imu_rate_hz": aligned.imu_rate_hz, "em_rate_hz": aligned.em_rate_hz},
             "overall": self.overall.as_dict(), "held": optional(self.held), "moving": optional(self.moving),
             "per_axis": {"frame": "base (clamp) frame; heading: about up (against gravity)", **self.axes.as_dict()},
@@ -346,12 +415,15 @@ class SensorAgreement:
 
 
 def sensor_agreement(imu: Dataset, em: Dataset, max_gap_s: float | None = None,
-                     min_hold_s: float = DEFAULT_MIN_HOLD_S, settle_s: float = DEFAULT_SETTLE_S) -> SensorAgreement:
-    """Align ``imu`` (samples in the IMU earth frame, with `imu_profile`) to ``em`` and
-    measure how they differ. Raises ValueError when nothing aligns."""
-    aligned = align(imu, em, max_gap_s)
+                     min_hold_s: float = DEFAULT_MIN_HOLD_S, settle_s: float = DEFAULT_SETTLE_S,
+                     em_frames: np.ndarray | None = None) -> SensorAgreement:
+    """Align ``imu`` (samples in the IMU earth frame, with `imu_profile`) to ``em``
+    (``em_frames``: its rows' tracker frame numbers, if known) and measure how they
+    differ. Raises ValueError when nothing aligns."""
+    aligned = align(imu, em, max_gap_s, em_frames)
     if len(aligned) == 0:
-        raise ValueError(f"no IMU sample lies within {aligned.max_gap_s:.3g} s of EM samples on both sides")
+        raise ValueError(f"no IMU sample lies between two EM samples without a gap between them (dropped: "
+                         f"{aligned.dropped.describe()})")
     difference = orientation_difference(aligned)
     hold_rows = settled_holds(aligned, min_hold_s, settle_s)
     holds = tuple(describe_hold(rows, aligned, difference) for rows in hold_rows)

@@ -18,8 +18,8 @@ import numpy as np
 from ..errors import UserError
 from ..files import make_folder_for
 from ..effects import CALIBRATION_POSES, SWEEPS, identifying_rows
-from ..estimation.calibration import (ALL_ROWS, DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_widening,
-                                      fit_mask, rows_that_identify)
+from ..estimation.calibration import (ALL_ROWS, DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, CalibrationResult,
+                                      calibrate_widening, fit_mask, rows_that_identify)
 from ..estimation.setup_warnings import calibration_warnings
 from ..model_choice import COSSERAT, ModelChoice, model_choice
 from ..params_io import calibration_parameter_file, check_parameter_output, effect_specs, write_parameter_file
@@ -36,6 +36,12 @@ from .log_notice import (warn_if_incomplete, warn_if_recorded_elsewhere, warn_if
 MAX_POSITION_WEIGHT_RAD_PER_M = 1e4
 # Exit code of a calibration whose values are not to be trusted (see the warnings).
 UNTRUSTED = 3
+
+
+def calibration_exit_code(result: CalibrationResult | None) -> int:
+    """`UNTRUSTED` for a calibration that did not converge or left a fitted value on a
+    bound (what its warnings say), else 0; 0 for no calibration (a parameter file given)."""
+    return UNTRUSTED if result is not None and (not result.converged or result.at_bound) else 0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -119,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
                                     "unsettled_steps": unsettled_steps})
     compare = command("compare", *input_words(args), "--params", args.output, "--online")
     print_next(console, "see how it predicts the sweeps with", [compare])
-    return 0 if result.converged and not result.at_bound else UNTRUSTED
+    return calibration_exit_code(result)
 
 
 _FITTED_ROWS = {CALIBRATION_POSES: "calibration poses", SWEEPS: "sweep steps", ALL_ROWS: "calibration poses and sweeps"}

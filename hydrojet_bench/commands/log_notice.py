@@ -6,7 +6,8 @@ another one wrote it, or a log read with a profile of another rig than it embeds
 settled equilibria (``single_sample_steps``), nor are steps whose tip still turned
 (``unsettled_steps``); and of a parameter file, what of the model it did
 not calibrate (`ModelChoice.uncalibrated`) and whether it was fitted on the steps
-compared (`warn_if_fitted_on`)."""
+compared (`warn_if_fitted_on`), or, without one, whether the command's own calibration
+was (`warn_if_scored_on_own_fit`)."""
 
 from __future__ import annotations
 
@@ -129,11 +130,29 @@ def warn_if_fitted_on(choice: ModelChoice, path: Path, validation: Dataset) -> s
             return None
         what = "the sweep steps compared were fitted"
     elif fit_on in (CALIBRATION_POSES, ALL_ROWS):
-        what = "it has no sweeps (sweep >= 0), so the steps compared are the calibration poses fitted"
+        what = _NO_SWEEPS
     else:
         return None
-    text = (f"{choice.parameter_path} was calibrated on {path} (fit_on {fit_on}): {what}, so these are "
-            "training errors, not held-out ones")
+    return _warn_training(f"{choice.parameter_path} was calibrated on {path} (fit_on {fit_on}): {what}")
+
+
+def warn_if_scored_on_own_fit(path: Path, validation: Dataset) -> str | None:
+    """For a command that calibrated the model on the calibration poses of ``path`` itself
+    (no parameter file) and compares on ``validation`` (the sweeps, or every step when
+    there are none): when there are no sweeps, print that the errors are training
+    errors, as `warn_if_fitted_on` says of a parameter file, and return it for the JSON
+    document. None when the sweeps compared are held out."""
+    if (validation.sweep >= 0).any():
+        return None
+    return _warn_training(f"the model was calibrated here on the calibration poses of {path}: {_NO_SWEEPS}")
+
+
+_NO_SWEEPS = "it has no sweeps (sweep >= 0), so the steps compared are the calibration poses fitted"
+
+
+def _warn_training(why: str) -> str:
+    """Print and return ``why``, followed by what it makes of the errors."""
+    text = f"{why}, so these are training errors, not held-out ones"
     _warn(text)
     return text
 

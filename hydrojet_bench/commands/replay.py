@@ -18,7 +18,7 @@ from ..estimation.setup_warnings import calibration_warnings
 from ..model_choice import choose_model
 from ..profile import load_profile
 from . import render
-from .calibrate import UNTRUSTED
+from .calibrate import UNTRUSTED, calibration_exit_code
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
 from .figure_options import add_format_argument
 from .log_notice import warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere
@@ -82,5 +82,4 @@ def run(args: argparse.Namespace) -> int:
                                       "held_out": fitted_on is None})
     if not np.isfinite(result.results["ref"].overall.orientation_rmse_deg):
         return 1
-    calibration = result.calibration
-    return UNTRUSTED if calibration is not None and (not calibration.converged or calibration.at_bound) else 0
+    return calibration_exit_code(result.calibration)

@@ -13,27 +13,31 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from rich.console import Console
 
-from ..analysis.sensors import (AXES, DEFAULT_MIN_HOLD_S, DEFAULT_SETTLE_S, METHODS, AngleSummary,
-                                EstimatorComparison, SensorAgreement, compare_estimators, hold_label,
-                                imu_profile, sensor_agreement)
+from ..analysis.sensors import (AXES, DEFAULT_MIN_HOLD_S, DEFAULT_SETTLE_S, FRAME_RULE, METHODS,
+                                AlignedOrientations, AngleSummary, EstimatorComparison, SensorAgreement,
+                                compare_estimators, hold_label, imu_profile, sensor_agreement)
 from ..data.dataset import Dataset
 from ..errors import ConvergenceError, UserError
 from ..estimation import OnlineSettings
-from ..estimation.calibration import calibrate_dataset
+from ..estimation.calibration import CalibrationResult, calibrate_dataset
 from ..estimation.setup_warnings import calibration_warnings
 from ..logs import read_log
-from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log
-from ..logs.topics import Sample
-from ..model_choice import ModelDefaults, model_choice
+from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log, em_frame_numbers, empty_note
+from ..logs.topics import EmFrame, Sample
+from ..model_choice import ModelChoice, ModelDefaults, model_choice
+from ..params import ModelParameters
 from . import render
+from .calibrate import UNTRUSTED, calibration_exit_code
 from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
-from .log_notice import warn_if_incomplete, warn_if_streams_fell_short, warn_if_uncalibrated
+from .log_notice import (warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_scored_on_own_fit,
+                         warn_if_streams_fell_short, warn_if_uncalibrated)
 
 # The longest EM gap --max-gap may bridge, s. A slerp across a gap assumes the tip turned
 # steadily in between; a minute already spans twelve of the paper's 5 s steps and three
@@ -56,15 +60,54 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--settle", type=float, default=DEFAULT_SETTLE_S, metavar="S",
                         help=f"ignore the first S seconds of each hold (default {DEFAULT_SETTLE_S:g} s)")
     parser.add_argument("--max-gap", type=float, metavar="S",
-                        help="largest EM gap to interpolate across, at most "
-                             f"{MAX_GAP_LIMIT_S:g} s (default: 1.5 EM periods)")
+                        help="largest interval between EM samples to interpolate across, at most "
+                             f"{MAX_GAP_LIMIT_S:g} s (default: any without a tracker frame lost, from the frame "
+                             "numbers the log records; 1.5 EM periods in a log without them)")
     render.add_json_argument(parser)
     parser.add_argument("--report", type=Path, metavar="DIR", help="write figures to this folder")
     add_format_argument(parser)
+    render.add_exit_codes(parser, {UNTRUSTED: "its own calibration (no --params) did not converge or left a value "
+                                              "on a bound: the estimation figures are of untrusted parameters"})
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    check_options(args)
+    # Every input and output is checked before the analysis, whose tables would
+    # otherwise be printed in full above the one line that refuses them.
+    render.check_json_output(args.json)
+    sources = load_sources(args.input, args.profile)
+    em, imu = sources.em, sources.imu
+    choice, params = choose_parameters(args, em, sources.metadata.get("bench", {}))
+    log_damage = warn_if_incomplete(args.input)
+    # A --profile of another rig models that rig's mountings and gravity, as calibrate does.
+    profile_mismatch = warn_if_recorded_elsewhere(args.input, args.profile, em.profile)
+    streams_short = warn_if_streams_fell_short(args.input)
+    console = render.console_for(args)
+    try:
+        agreement = sensor_agreement(imu, em, args.max_gap, args.min_hold, args.settle, sources.em_frames)
+    except ValueError as error:
+        raise UserError(f"{args.input}: cannot align the IMU and EM samples: {error}") from None
+    print_agreement(console, agreement, args.input)
+    estimation = estimate(args, choice, params, em, imu, console)
+    if estimation is not None:
+        print_estimation(console, estimation)
+    if args.json:
+        render.write_json(args.json, {
+            "log": str(args.input), **agreement.as_dict(),
+            "online_estimation": None if estimation is None else estimation.as_dict(),
+            "log_damage": log_damage, "profile_mismatch": profile_mismatch, "streams_below_rate": streams_short})
+    if args.report:
+        from ..analysis.sensor_plots import write_sensor_report
+
+        for path in write_sensor_report(args.report, agreement, args.figure_format):
+            console.print(f"wrote {render.plain(path)}")
+    # As calibrate and replay: figures of parameters whose fit is not to be trusted.
+    return calibration_exit_code(None if estimation is None else estimation.calibration)
+
+
+def check_options(args: argparse.Namespace) -> None:
+    """--min-hold, --settle and --max-gap are seconds >= 0; --max-gap at most a minute."""
     for option in ("min_hold", "settle", "max_gap"):
         value = getattr(args, option)
         if value is not None and not (np.isfinite(value) and value >= 0):
@@ -72,55 +115,100 @@ def run(args: argparse.Namespace) -> int:
     if args.max_gap is not None and args.max_gap > MAX_GAP_LIMIT_S:
         raise UserError(f"--max-gap must be at most {MAX_GAP_LIMIT_S:g} s (a longer EM gap spans several plan "
                         f"steps), got {args.max_gap}")
-    em, imu, metadata = load_sources(args.input, args.profile)
-    log_damage = warn_if_incomplete(args.input)
-    streams_short = warn_if_streams_fell_short(args.input)
-    console = render.console_for(args)
-    try:
-        agreement = sensor_agreement(imu, em, args.max_gap, args.min_hold, args.settle)
-    except ValueError as error:
-        raise UserError(f"{args.input}: cannot align the IMU and EM samples: {error}") from None
-    print_agreement(console, agreement, args.input)
-    estimation, model_line = estimate(args, em, imu, metadata.get("bench", {}), console)
-    if estimation is not None:
-        print_estimation(console, estimation, model_line)
-    if args.json:
-        render.write_json(args.json, {
-            "log": str(args.input), **agreement.as_dict(),
-            "online_estimation": None if estimation is None else {"model": model_line, **estimation.as_dict()},
-            "log_damage": log_damage, "streams_below_rate": streams_short})
-    if args.report:
-        from ..analysis.sensor_plots import write_sensor_report
-
-        for path in write_sensor_report(args.report, agreement, args.figure_format):
-            console.print(f"wrote {render.plain(path)}")
-    return 0
 
 
-def load_sources(log: Path, profile: str | None) -> tuple[Dataset, Dataset, dict]:
-    """The log's EM samples, its IMU samples (with the IMU earth frame's gravity) and its
-    metadata. A log without IMU samples is a `UserError` that says so."""
-    contents = read_log(log, topics=[SAMPLE_TOPIC])
+@dataclass(frozen=True)
+class Sources:
+    """A session log's EM samples, its IMU samples (with the IMU earth frame's gravity,
+    `imu_profile`), the tracker frame number of each EM sample (None if the log does
+    not say) and the log's metadata."""
+
+    em: Dataset
+    imu: Dataset
+    em_frames: np.ndarray | None
+    metadata: dict
+
+
+def load_sources(log: Path, profile: str | None) -> Sources:
+    """The log's samples (`Sources`). A log without samples of both sources is a
+    `UserError` that says what it lacks."""
+    contents = read_log(log, topics=[SAMPLE_TOPIC, EmFrame.topic])
     sources = {sample.source for sample in contents.on(Sample)}
     for source, what in (("imu", "IMU"), ("em", "EM tracker")):
         if source not in sources:
-            raise UserError(f"{log}: no {what} samples ({SAMPLE_TOPIC} with source {source!r}); `sensors` needs a "
-                            "session recorded with both the IMUs and the EM tracker")
+            raise UserError(missing_source(log, what, source, sources, contents.truncated))
     em = dataset_from_log(log, profile, source="em")
-    return em, dataset_from_log(log, imu_profile(em.profile), source="imu"), contents.metadata
+    return Sources(em, dataset_from_log(log, imu_profile(em.profile), source="imu"),
+                   em_frame_numbers(contents, em.time_s), contents.metadata)
 
 
-def estimate(args: argparse.Namespace, em: Dataset, imu: Dataset, bench: dict[str, str],
-             console: Console) -> tuple[EstimatorComparison | None, str]:
-    """The online estimator fed by each source (None, with a note, when there is
-    nothing to calibrate on), and a line naming the model and its parameters."""
-    em_steps, imu_steps = em.quasistatic_steps(), imu.quasistatic_steps()
+def missing_source(log: Path, what: str, source: str, sources: set[str], truncated: bool) -> str:
+    """Why ``log``, whose samples come from ``sources``, has none from ``source``
+    (``what``, in words), in one line: an empty file, a log cut before its first sample,
+    or a session recorded without that device."""
+    if empty_note(log):
+        return (f"{log}: the file is empty (0 bytes): no session log (its session stopped before writing anything, "
+                "or it was never written)")
+    cut = " (the session was stopped, or the file was cut)"
+    if not sources:
+        if truncated:
+            return f"{log}: no {SAMPLE_TOPIC} samples at all: the log is truncated before its first one{cut}"
+        return (f"{log}: no {SAMPLE_TOPIC} samples at all; `sensors` needs a session recorded with both the IMUs "
+                "and the EM tracker")
+    lacking = f"{log}: no {what} samples ({SAMPLE_TOPIC} with source {source!r}), only {', '.join(sorted(sources))}"
+    if truncated:
+        return f"{lacking}: the log is truncated{cut}, and `sensors` needs both the IMUs and the EM tracker"
+    return f"{lacking}; `sensors` needs a session recorded with both the IMUs and the EM tracker"
+
+
+def choose_parameters(args: argparse.Namespace, em: Dataset,
+                      bench: dict[str, str]) -> tuple[ModelChoice, ModelParameters | None]:
+    """The model (the live one unless --model, --effect or --params say otherwise) and the
+    --params values on the log's profile (None without --params: calibrated later)."""
     live = ModelDefaults(bench.get("model", "cosserat"), tuple(json.loads(bench.get("effects", "[]"))))
     choice = model_choice(args, live)
+    if args.params is None:
+        return choice, None
+    return choice, choice.parameters(em.profile.model_parameters())
+
+
+@dataclass(frozen=True)
+class Estimation:
+    """The online estimator fed by each source (``comparison``), the line naming the
+    model and its parameters (``model_line``), the own calibration on the EM
+    calibration poses (None with --params) and the notice when the steps scored are
+    the ones the parameters were fitted on (``training``: training errors)."""
+
+    comparison: EstimatorComparison
+    model_line: str
+    calibration: CalibrationResult | None
+    training: str | None
+
+    def as_dict(self) -> dict:
+        return {"model": self.model_line, "calibration": calibration_figures(self.calibration),
+                "held_out": self.training is None, "training_notice": self.training, **self.comparison.as_dict()}
+
+
+def calibration_figures(result: CalibrationResult | None) -> dict | None:
+    """The own calibration for the JSON document, with the keys replay writes: whether
+    it converged (and why, in words) and the values on a bound; None with --params."""
+    if result is None:
+        return None
+    return {"poses": result.poses, "rms_orientation_deg_before": result.rms_orientation_deg_before,
+            "rms_orientation_deg_after": result.rms_orientation_deg_after,
+            "parameters": dict(zip(result.names, map(float, result.values))), "converged": result.converged,
+            "convergence": result.convergence, "at_bound": list(result.at_bound)}
+
+
+def estimate(args: argparse.Namespace, choice: ModelChoice, params: ModelParameters | None, em: Dataset,
+             imu: Dataset, console: Console) -> Estimation | None:
+    """The online estimator fed by each source (None, with a note, when there is
+    nothing to calibrate on). ``params``: those of --params, else None to calibrate on
+    the EM calibration poses."""
+    em_steps, imu_steps = em.quasistatic_steps(), imu.quasistatic_steps()
     model = choice.model
-    base = em.profile.model_parameters()
-    if args.params is not None:
-        params = choice.parameters(base)
+    calibration = None
+    if params is not None:
         origin = f"parameters from {args.params}"
         warn_if_uncalibrated(choice)
     else:
@@ -128,9 +216,9 @@ def estimate(args: argparse.Namespace, em: Dataset, imu: Dataset, bench: dict[st
         if len(poses) == 0:
             console.print("[yellow]no EM calibration poses (sweep -1) in the log and no --params: "
                           "online estimation skipped[/]")
-            return None, ""
+            return None
         try:
-            calibration = calibrate_dataset(model, poses, base, choice.calibration_names)
+            calibration = calibrate_dataset(model, poses, em.profile.model_parameters(), choice.calibration_names)
         except (ValueError, ConvergenceError) as error:
             raise UserError(f"{args.input}: cannot calibrate {model.name} on the EM calibration poses: "
                             f"{error}") from None
@@ -145,8 +233,12 @@ def estimate(args: argparse.Namespace, em: Dataset, imu: Dataset, bench: dict[st
         raise UserError(f"{args.input}: {error}") from None
     except ConvergenceError as error:
         raise UserError(f"{args.input}: {model.name} did not converge on a logged step: {error}") from None
+    # Without sweeps the steps scored are the calibration poses: those fitted, by this
+    # calibration or by the --params file's own on this log.
+    training = (warn_if_scored_on_own_fit(args.input, comparison.steps) if calibration is not None
+                else warn_if_fitted_on(choice, args.input, comparison.steps))
     effects = ", ".join(effect.name for effect in model.effects)
-    return comparison, f"{model.name} ({effects}); {origin}"
+    return Estimation(comparison, f"{model.name} ({effects}); {origin}", calibration, training)
 
 
 # --- console -------------------------------------------------------------------------
@@ -160,14 +252,22 @@ def _hz(rate: float | None) -> str:
     return "-" if rate is None else f"{rate:.1f} Hz"
 
 
+def _bridging(aligned: AlignedOrientations) -> str:
+    """How the EM samples were slerped to the IMU stamps, and what made a gap."""
+    if aligned.gap_rule == FRAME_RULE:
+        return (f"slerped to the IMU stamps between EM samples of consecutive tracker frames (intervals up to "
+                f"{aligned.max_gap_s * 1e3:.0f} ms; a gap: a tracker frame lost)")
+    return f"slerped to the IMU stamps across intervals up to {aligned.max_gap_s * 1e3:.0f} ms"
+
+
 def print_agreement(console: Console, agreement: SensorAgreement, log: Path) -> None:
     aligned, axes = agreement.aligned, agreement.axes
     table = render.table(
         f"IMU against EM: tip orientation in the base frame, {log}", labels=("samples",),
         numbers=("n", "RMS (deg)", "mean (deg)", "max (deg)"),
         caption=f"{len(aligned)} of {aligned.imu_samples} IMU samples ({_hz(aligned.imu_rate_hz)}) aligned "
-                f"with {aligned.em_samples} EM samples ({_hz(aligned.em_rate_hz)}), slerped to the IMU "
-                f"stamps across gaps up to {aligned.max_gap_s * 1e3:.0f} ms; held: settled part of holds "
+                f"with {aligned.em_samples} EM samples ({_hz(aligned.em_rate_hz)}), {_bridging(aligned)}; "
+                f"dropped: {aligned.dropped.describe()}; held: settled part of holds "
                 f"of >= {agreement.min_hold_s:g} s after {agreement.settle_s:g} s")
 
     def row(label: str, summary: AngleSummary | None) -> None:
@@ -213,16 +313,19 @@ def print_agreement(console: Console, agreement: SensorAgreement, log: Path) -> 
     console.print(table)
 
 
-def print_estimation(console: Console, estimation: EstimatorComparison, model_line: str) -> None:
-    table = render.table(f"Online estimation fed by EM or by IMU, scored against EM ({len(estimation.steps)} "
-                         "settled steps)", labels=("method",),
+def print_estimation(console: Console, estimation: Estimation) -> None:
+    comparison = estimation.comparison
+    scored = f"{len(comparison.steps)} settled steps"
+    if estimation.training is not None:
+        scored += ", the calibration poses fitted: training errors, not held-out ones"
+    table = render.table(f"Online estimation fed by EM or by IMU, scored against EM ({scored})", labels=("method",),
                          numbers=("orient. RMSE (deg)", "gain", "pos. RMSE (mm)", "gain"),
-                         caption=f"{model_line}; gain: cut in RMS error from Ref. (constant disturbance)")
+                         caption=f"{estimation.model_line}; gain: cut in RMS error from Ref. (constant disturbance)")
     for method in METHODS:
-        summary = estimation.results[method].overall
+        summary = comparison.results[method].overall
         gain = position_gain = None
         if method != "ref":
-            gain, position_gain = estimation.gain(method), estimation.position_gain(method)
+            gain, position_gain = comparison.gain(method), comparison.position_gain(method)
         table.add_row(SHORT_LABELS[method], _deg(summary.orientation_rmse_deg),
                       "-" if gain is None else f"{gain:+.0%}",
                       "-" if summary.position_rmse_mm is None else f"{summary.position_rmse_mm:.2f}",

@@ -19,8 +19,8 @@ import numpy as np
 from ..data.dataset import Dataset, SampleFlag, saturation_flags
 from ..errors import UserError
 from ..profile import RigProfile, load_profile, profile_from_mapping
-from .reader import read_log
-from .topics import Sample, Step
+from .reader import LogContents, read_log
+from .topics import EmFrame, Sample, Step
 
 SAMPLE_TOPIC = Sample.topic
 
@@ -52,10 +52,7 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
         while rows and (rows[-1].sweep, rows[-1].step) == last:
             rows.pop()
     if not rows:
-        sources = sorted({sample.source for sample in samples})
-        found = f"it has samples from {', '.join(sources)} only" if sources else f"it has no {SAMPLE_TOPIC} messages"
-        cut = _empty(path) or (" (the log is truncated)" if contents.truncated else "")
-        raise UserError(f"{path}: no {SAMPLE_TOPIC} samples from source {source!r}: {found}{cut}")
+        raise UserError(no_samples_message(path, samples, source, len(finished), contents.truncated))
     rig = rig_profile_of_log(path, profile, contents.metadata)
 
     def column(key: str) -> np.ndarray:
@@ -81,6 +78,39 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
         )
     except ValueError as error:
         raise UserError(f"{path}: {SAMPLE_TOPIC} ({source}): {error}") from None
+
+
+def em_frame_numbers(contents: LogContents, time_s: np.ndarray) -> np.ndarray | None:
+    """The tracker frame number of each EM sample at session times ``time_s`` (s; rows
+    of a `dataset_from_log` of ``contents``' log): the ``/em/frame`` record the bench wrote
+    at the same time (it stamps a frame and its sample alike). None when the log does not
+    say for every sample (read without /em/frame, written by an earlier version, or the
+    frame's chunk damaged away) or two frames share a stamp."""
+    frames: dict[float, int | None] = {}
+    for frame in contents.on(EmFrame):
+        frames[frame.t_s] = None if frame.t_s in frames else frame.frame_number
+    numbers = [frames.get(t_s) for t_s in np.asarray(time_s, dtype=float).tolist()]
+    if not numbers or None in numbers:
+        return None
+    return np.array(numbers, dtype=np.int64)
+
+
+def no_samples_message(path: Path, samples: list[Sample], source: str, finished_steps: int, truncated: bool) -> str:
+    """Why a log (``samples``: all its /bench/sample records) gives no sample of
+    ``source``, in one line: it has none, or has some but none in a step that finished
+    (``finished_steps``: /bench/step records; none, in a ``truncated`` log, means its
+    samples all lie in the step the cut interrupted)."""
+    own = sum(sample.source == source for sample in samples)
+    cut = " (the log is truncated)" if truncated else ""
+    if own:
+        # Listing the sources would name this one too ("no samples from 'em': it has
+        # samples from em, imu only"): what is missing is a finished step.
+        where = (f"all {own} lie in the step the cut interrupted, which did not finish" if not finished_steps
+                 else f"none of its {own} lies in one of the {finished_steps} steps the log says finished")
+        return f"{path}: no {SAMPLE_TOPIC} samples from source {source!r} in a finished step: {where}{cut}"
+    sources = sorted({sample.source for sample in samples})
+    found = f"it has samples from {', '.join(sources)} only" if sources else f"it has no {SAMPLE_TOPIC} messages"
+    return f"{path}: no {SAMPLE_TOPIC} samples from source {source!r}: {found}{empty_note(path) or cut}"
 
 
 def _positions(path: Path, rows: list[Sample], key: str) -> np.ndarray | None:
@@ -112,14 +142,14 @@ def rig_profile_of_log(path: Path, profile: RigProfile | str | Path | None,
             raise UserError(f"{where}: not valid JSON: {error}") from None
     # Logs written before the resolved profile was embedded: the file's own text.
     text = bench.get("profile_toml")
-    if not text and not metadata and not _empty(path):
+    if not text and not metadata and not empty_note(path):
         # The session's metadata comes right after the header: a log without any was cut
         # before it (or written by another program).
         raise UserError(f"{path}: no metadata at all ({Path(path).stat().st_size} bytes): the log was cut before "
                         "the session wrote its metadata, or another program wrote it (give its rig profile with "
                         "--profile if it holds a session's samples)")
     if not text:
-        raise UserError(f"{path}: the log embeds no rig profile (metadata bench.profile_toml){_empty(path)}; "
+        raise UserError(f"{path}: the log embeds no rig profile (metadata bench.profile_toml){empty_note(path)}; "
                         "give one with --profile")
     where = f"{path}, metadata bench.profile_toml"
     try:
@@ -132,7 +162,7 @@ def rig_profile_of_log(path: Path, profile: RigProfile | str | Path | None,
     return profile_from_mapping(document, source=where)
 
 
-def _empty(path: str | Path) -> str:
+def empty_note(path: str | Path) -> str:
     """" (an empty file: 0 bytes)" for a log of no bytes at all, which reads as a log cut
     before its first record (a session stopped before writing anything); else ""."""
     try:

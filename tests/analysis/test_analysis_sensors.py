@@ -16,8 +16,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hydrojet_bench.analysis.sensors import (align, compare_estimators, imu_profile, matched_steps,
-                                            sensor_agreement, settled_holds, slerp)
+from hydrojet_bench.analysis.sensors import (FRAME_RULE, TIME_RULE, DroppedSamples, align, compare_estimators,
+                                            imu_profile, matched_steps, sensor_agreement, settled_holds, slerp)
 from hydrojet_bench.model_choice import build_model
 from hydrojet_bench.data.dataset import Dataset, SampleFlag
 from hydrojet_bench.geometry import matrix_from_quat, quat_from_rotvec, quat_multiply, rotation_angle_deg
@@ -110,7 +110,40 @@ def test_alignment_bridges_no_gap_and_no_end():
                       & ~((imu_time > 5.975) & (imu_time < 7.0)) & ~((imu_time > 7.975) & (imu_time < 8.025)))
     assert len(aligned) == expected
     assert aligned.max_gap_s == pytest.approx(1.5 / RATE_HZ)
+    assert aligned.dropped == DroppedSamples(int(np.sum(imu_time < 0)), int(np.sum(imu_time > em.time_s[-1])),
+                                             len(imu_time) - expected - int(np.sum(imu_time < 0))
+                                             - int(np.sum(imu_time > em.time_s[-1])), 3)
     assert np.max(rotation_angle_deg(aligned.imu, aligned.em)) < 0.05  # slow path, 25 ms steps
+
+
+def test_jittered_stamps_are_no_gap_when_no_tracker_frame_was_lost():
+    """The host stamps each EM frame when it receives it: on a simulated rig at x25 the
+    stamps of a 25 ms period came 1.7-60 ms apart with no frame lost, and a rule of 1.5
+    periods on the stamps dropped the IMU samples in every long interval as lying in a
+    gap. The tracker's frame numbers say what was lost: here frame 160 only."""
+    rng = np.random.default_rng(3)
+    frames = np.arange(400)
+    em_time = frames / RATE_HZ + rng.uniform(0.0, 0.024, len(frames))  # received up to 24 ms late
+    keep = frames != 160
+    em = em_samples(em_time, bending_path(em_time)).select(keep)
+    imu_time = np.arange(-0.5, 10.5, 0.1) + 0.003
+    imu = imu_samples(em_samples(imu_time, bending_path(imu_time)))
+    on_stamps = align(imu, em)
+    assert on_stamps.gap_rule == TIME_RULE and on_stamps.dropped.em_gaps > 10  # jitter taken for gaps
+    aligned = align(imu, em, em_frames=frames[keep])
+    assert aligned.gap_rule == FRAME_RULE
+    lost = (imu_time > em_time[159]) & (imu_time < em_time[161])
+    before, after = imu_time < em.time_s[0], imu_time > em.time_s[-1]
+    assert aligned.dropped == DroppedSamples(int(before.sum()), int(after.sum()), int(lost.sum()), 1)
+    assert len(aligned) == len(imu_time) - aligned.dropped.total
+    assert not np.any((aligned.time_s > em_time[159]) & (aligned.time_s < em_time[161]))
+    assert aligned.max_gap_s == pytest.approx(np.diff(em.time_s)[np.diff(frames[keep]) == 1].max())
+    # An EM pose the tracker could not measure is as lost as a frame: a gap.
+    flags = np.where(frames[keep] == 300, int(SampleFlag.TIP_MISSING), 0)
+    flagged = align(imu, em_samples(em.time_s, bending_path(em.time_s), flags=flags), em_frames=frames[keep])
+    assert flagged.dropped.em_gaps == 2
+    # --max-gap is a limit on the stamps, whatever the frame numbers say.
+    assert align(imu, em, 0.0375, em_frames=frames[keep]).gap_rule == TIME_RULE
 
 
 def test_stamps_equal_to_em_stamps_take_those_samples():
