@@ -91,9 +91,13 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
             raise UserError(f"--time-scale must be at least {MIN_TIME_SCALE:g} (real time: the devices' timeouts "
                             f"are wall time) and at most {MAX_TIME_SCALE:g} (the simulated rig cannot keep up "
                             f"beyond), got {args.time_scale}")
-        if not settings.transports.simulated and args.time_scale != 1.0:
-            raise UserError(f"--time-scale applies to the simulated rig only; {profile.source} drives real devices "
-                            "([transports])")
+        real = settings.transports.real_devices()
+        if real and args.time_scale != 1.0:
+            # The clock runs on wall time with any real device (`Session`): the same rule
+            # as the profile's [session] time_scale.
+            raise UserError(f"--time-scale {args.time_scale:g}: {profile.source} drives a real device ({real[0]}), "
+                            "and a rig with any real device runs on wall time (only the fully simulated rig "
+                            "takes --time-scale)")
         settings = msgspec.structs.replace(settings, session=msgspec.structs.replace(settings.session,
                                                                                      time_scale=args.time_scale))
     limits = tuple(table.max_force_n for table in settings.valve_calibrations())
@@ -125,7 +129,8 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
                              setup_checks=not args.skip_checks)
     console = render.console_for(args)
     progress = render.progress_console()
-    rig = "simulated rig" if settings.transports.simulated else "rig"
+    rig = ("simulated rig" if settings.transports.all_simulated
+           else "rig, some devices emulated" if settings.transports.simulated else "rig")
     console.print(f"session on [bold]{render.plain(profile.name)}[/] ({rig}): "
                   f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.session.time_scale:g}, "
                   f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; "
