@@ -30,6 +30,7 @@ from ..model_choice import ModelDefaults, model_choice
 from ..plans import clipped_warning, short_steps_warning
 from ..profile import load_profile
 from . import render
+from .calibrate import UNTRUSTED
 from .common import add_model_arguments, check_seed
 from .figure_options import add_format_argument
 from .next_steps import command
@@ -69,7 +70,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                      "its Table II and the next commands to standard output.")
     parser.add_argument("--skip-checks", action="store_true",
                         help="skip the wiring and level checks before the plan (the log records the skip)")
-    render.add_exit_codes(parser, {143: "stopped by SIGTERM (valves closed, log finished)"})
+    render.add_exit_codes(parser, {UNTRUSTED: "the session's calibration failed, did not converge or left a value on "
+                                              "a bound (the session ran on; its warnings say which, and its Table II "
+                                              "is not that of a calibrated model)",
+                                   143: "stopped by SIGTERM (valves closed, log finished)"})
     parser.set_defaults(func=run)
 
 
@@ -153,7 +157,16 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
         progress.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
         return 143
     _print_outcome(console, progress, result, model.name, args)
-    return 0
+    return 0 if _calibration_trusted(result) else UNTRUSTED
+
+
+def _calibration_trusted(result) -> bool:
+    """Whether the session's calibration, if it ran, left parameters to trust: it did
+    not fail and, as `calibrate` and `replay` judge theirs, its fit converged with no
+    value on a bound."""
+    calibration = result.calibration
+    return result.calibration_failure is None and (calibration is None
+                                                   or (calibration.converged and not calibration.at_bound))
 
 
 def _foxglove(address: str | None) -> contextlib.AbstractContextManager:
@@ -277,6 +290,10 @@ def _print_outcome(console: Console, warnings: Console, result, model_name: str,
     if result.calibration is not None:
         console.print(f"calibration on the calibration poses: RMS {result.calibration.rms_orientation_deg_before:.2f} deg "
                       f"-> {result.calibration.rms_orientation_deg_after:.2f} deg")
+    if result.calibration_failure is not None:
+        warnings.print(f"[yellow]warning:[/] the calibration on the calibration poses failed: "
+                       f"{render.plain(result.calibration_failure)}; the session predicted and estimated with its "
+                       "starting parameters, so its errors are not those of a calibrated model", highlight=False)
     for warning in result.calibration_warnings:
         warnings.print(f"[yellow]warning:[/] {render.plain(warning)}")
     for rate in result.stream_rates:
@@ -308,8 +325,9 @@ def _print_outcome(console: Console, warnings: Console, result, model_name: str,
                            "sweeps' Table II and figures, and this session has no sweep steps")
     log = result.log_path
     console.print("\nnext:")
-    # Only what runs on this log: calibrate needs calibration poses, diagnose sweeps too.
-    poses = steps is not None and bool((steps.sweep == -1).any())
+    # Only what runs on this log: calibrate needs calibration poses, diagnose sweeps too;
+    # poses the session's own calibration failed on fail `calibrate` the same way.
+    poses = steps is not None and bool((steps.sweep == -1).any()) and result.calibration_failure is None
     diagnosable = steps is not None and _diagnosable(steps)
     for line in (f"{command('replay', log, '--online')}  # re-run the estimation offline",
                  *([f"{command('calibrate', log, '-o', 'p.toml')}  # calibrate on the logged poses",
