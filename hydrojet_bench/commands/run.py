@@ -4,7 +4,8 @@ Plays a plan (default: the paper's protocol, 40 calibration poses then nine swee
 calibrates on the calibration poses when they end, estimates the disturbance live,
 records everything to an MCAP log, shows a live view, and at the end prints the paper's
 Table II for the session (optionally a report folder of plots) and the commands to try
-next. Ctrl-C or SIGTERM stop it cleanly: valves off, log finished.
+next. Ctrl-C, SIGTERM or SIGHUP (its terminal or ssh connection closed) stop it cleanly:
+valves off, log finished.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import os
 import shlex
 import signal
 import sys
@@ -39,6 +41,10 @@ if TYPE_CHECKING:
     from ..bench.foxglove_live import FoxgloveLive
 
 DEFAULT_LOG_DIR = Path("sessions")
+# Signals that stop a session as Ctrl-C does (valves closed, log finished), exiting with
+# 128 + the signal's number as a shell reports a process it ended: SIGTERM (kill, a
+# service manager) and SIGHUP (the terminal or ssh connection closed).
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 FOXGLOVE_PORT = 8765  # Foxglove's and Lichtblick's default for a WebSocket connection
 
 
@@ -73,7 +79,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     render.add_exit_codes(parser, {UNTRUSTED: "the session's calibration failed, did not converge or left a value on "
                                               "a bound (the session ran on; its warnings say which, and its Table II "
                                               "is not that of a calibrated model)",
-                                   143: "stopped by SIGTERM (valves closed, log finished)"})
+                                   128 + signal.SIGHUP: "stopped by SIGHUP: its terminal or ssh connection "
+                                                        "closed (valves closed, log finished)",
+                                   128 + signal.SIGTERM: "stopped by SIGTERM (valves closed, log finished)"})
     parser.set_defaults(func=run)
 
 
@@ -153,9 +161,9 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
         # The session has closed the valves and finished its log on the way out.
         progress.print(f"[yellow]interrupted:[/] valves closed, log finished: {render.plain(log_path)}")
         return 130
-    if result is None:
-        progress.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
-        return 143
+    if isinstance(result, signal.Signals):
+        progress.print(f"[yellow]stopped by {result.name}:[/] valves closed, log finished: {render.plain(log_path)}")
+        return 128 + result
     _print_outcome(console, progress, result, model.name, args)
     return 0 if _calibration_trusted(result) else UNTRUSTED
 
@@ -185,16 +193,21 @@ async def _run_session(request, console: Console, live: bool, clipped: frozenset
     from ..bench.live_view import LiveView
     from ..bench.session import Session
 
-    terminated = False
+    stopped_by: signal.Signals | None = None
     task = asyncio.current_task()
     loop = asyncio.get_running_loop()
+    terminals = _terminals()
 
-    def on_sigterm() -> None:
-        nonlocal terminated
-        terminated = True
-        task.cancel()
+    def on_signal(number: signal.Signals) -> None:
+        nonlocal stopped_by
+        if number == signal.SIGHUP:
+            _away_from_lost_terminal(terminals)
+        if stopped_by is None:  # cancelled once: a second signal changes nothing
+            stopped_by = number
+            task.cancel()
 
-    loop.add_signal_handler(signal.SIGTERM, on_sigterm)
+    for number in STOP_SIGNALS:
+        loop.add_signal_handler(number, on_signal, number)
     view_context = LiveView(console, request.settings.session.time_scale, f"HydroJet bench: {request.profile.name}") \
         if live else contextlib.nullcontext()
     try:
@@ -203,12 +216,39 @@ async def _run_session(request, console: Console, live: bool, clipped: frozenset
             session = Session(request, on_update=on_update, on_log_message=on_log_message)
             return await session.run()
     except asyncio.CancelledError:
-        if terminated:
+        if stopped_by is not None:
             task.uncancel()
-            return None
+            return stopped_by
         raise
     finally:
-        loop.remove_signal_handler(signal.SIGTERM)
+        for number in STOP_SIGNALS:
+            loop.remove_signal_handler(number)
+
+
+def _terminals() -> list[int]:
+    """The descriptors of standard output and error that are a terminal, taken before any
+    hangup: after one, ``isatty`` says no more."""
+    found = []
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            fd = stream.fileno()
+        except (AttributeError, OSError, ValueError):  # replaced by an object without one (a test's capture)
+            continue
+        if os.isatty(fd):
+            found.append(fd)
+    return found
+
+
+def _away_from_lost_terminal(terminals: list[int]) -> None:
+    """Point these descriptors (standard output and error that were a terminal) at
+    /dev/null: a write to a hung-up terminal fails (EIO), and the live view's or the
+    summary's would stop the way out halfway (the valves' ALL_OFF, the log's end)."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for fd in terminals:
+            os.dup2(devnull, fd)
+    finally:
+        os.close(devnull)
 
 
 # Event sources whose warnings the command prints itself, before the session or in its

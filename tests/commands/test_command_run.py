@@ -1,10 +1,15 @@
-"""`hydrojet-bench run` as a user starts it: a clean stop on SIGINT and SIGTERM (valves
+"""`hydrojet-bench run` as a user starts it: a clean stop on SIGINT, SIGTERM and SIGHUP (valves
 off, log finished), the live view, and clear errors for a user's mistakes."""
 
 from __future__ import annotations
 
+import fcntl
+import os
+import pty
+import select
 import signal
 import subprocess
+import termios
 import sys
 import time
 from pathlib import Path
@@ -28,10 +33,11 @@ def start_run(tmp_path: Path, *options: str) -> tuple[subprocess.Popen, Path]:
     return process, log_path
 
 
-def wait_for_commands(log_path: Path, timeout_s: float = 120.0) -> None:
+def wait_for_commands(log_path: Path, timeout_s: float = 120.0, while_waiting=lambda: None) -> None:
     """Until the session has opened a jet (its log shows a non-zero command)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
+        while_waiting()
         if log_path.exists():
             commands = [m.jet_forces_n for m in read_log(log_path, topics=["/valves/command"]).messages]
             if any(max(forces) > 0 for forces in commands):
@@ -40,7 +46,8 @@ def wait_for_commands(log_path: Path, timeout_s: float = 120.0) -> None:
     raise AssertionError("the session never commanded a jet")
 
 
-@pytest.mark.parametrize("signal_number, exit_code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+@pytest.mark.parametrize("signal_number, exit_code", [(signal.SIGINT, 130), (signal.SIGTERM, 143),
+                                                       (signal.SIGHUP, 129)])
 def test_a_signal_stops_the_session_cleanly(tmp_path, signal_number, exit_code):
     process, log_path = start_run(tmp_path)
     try:
@@ -64,6 +71,49 @@ def test_a_signal_stops_the_session_cleanly(tmp_path, signal_number, exit_code):
     # ...and the controller's acknowledgement of it, logged after the rig closed.
     assert [m.message for m in contents.on(Event) if m.source == "valves"][-1] == ("closed: the controller "
                                                                                   "acknowledged ALL_OFF")
+
+
+def test_a_closed_terminal_stops_the_session_cleanly(tmp_path):
+    """ssh or the terminal window closed under the live view: the kernel hangs up the
+    terminal (a write to it fails from then on) and sends SIGHUP. The session still closes
+    the valves and finishes its log, and exits 129."""
+    master, slave = pty.openpty()
+    log_path = tmp_path / "run.mcap"
+
+    def take_the_terminal() -> None:  # in the child, a session leader: the pty becomes its terminal
+        fcntl.ioctl(0, termios.TIOCSCTTY, 0)
+
+    process = subprocess.Popen([sys.executable, "-m", "hydrojet_bench.cli", "run", "--plan", "sweeps",
+                                "--time-scale", "5", "--log", str(log_path)], stdin=slave, stdout=slave,
+                               stderr=slave, start_new_session=True, preexec_fn=take_the_terminal)
+    os.close(slave)
+    try:
+        # The live view writes on: read it, or the terminal's buffer fills and stops the session.
+        wait_for_commands(log_path, while_waiting=lambda: _drain(master))
+        os.close(master)  # the hangup
+        master = None
+        process.wait(timeout=60)
+    finally:
+        if master is not None:
+            os.close(master)
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 129
+    contents = read_log(log_path)
+    assert not contents.truncated
+    assert any("interrupted" in m.message for m in contents.on(Event))
+    assert [m.message for m in contents.on(Event) if m.source == "valves"][-1] == ("closed: the controller "
+                                                                                  "acknowledged ALL_OFF")
+
+
+def _drain(fd: int) -> None:
+    while select.select([fd], [], [], 0)[0]:
+        try:
+            if not os.read(fd, 65536):
+                return
+        except OSError:  # the child's side closed
+            return
 
 
 def test_run_reports_a_bad_plan_file_without_traceback(tmp_path):
