@@ -232,8 +232,11 @@ class Session:
         self._log: LogWriter | None = None
         self._devices: SimulatedDevices | None = None
         self._stopping = False
+        # The IMUs' samples are counted as each drain of the FIFOs brings them, a batch
+        # of FIFO_DRAIN_SAMPLES: a plan step's window may hold a drain fewer.
         self._rates = {"em": StreamRateMeter("em", request.settings.tracker.rate_hz),
-                       "imu": StreamRateMeter("imu", output_rate_hz(request.settings.imu.rate_hz))}
+                       "imu": StreamRateMeter("imu", output_rate_hz(request.settings.imu.rate_hz),
+                                              quantum=FIFO_DRAIN_SAMPLES)}
         self._rate_warned: set[str] = set()
         # Settled steps waiting for their estimate, in plan order (`_estimate_steps`).
         self._to_estimate: asyncio.Queue[tuple[int, Dataset, float]] = asyncio.Queue()
