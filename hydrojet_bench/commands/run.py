@@ -160,9 +160,11 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
     except KeyboardInterrupt:
         # The session has closed the valves and finished its log on the way out.
         progress.print(f"[yellow]interrupted:[/] valves closed, log finished: {render.plain(log_path)}")
+        _say_no_report(progress, args, log_path)
         return 130
     if isinstance(result, signal.Signals):
         progress.print(f"[yellow]stopped by {result.name}:[/] valves closed, log finished: {render.plain(log_path)}")
+        _say_no_report(progress, args, log_path)
         return 128 + result
     _print_outcome(console, progress, result, model.name, args)
     return 0 if _calibration_trusted(result) else UNTRUSTED
@@ -175,6 +177,33 @@ def _calibration_trusted(result) -> bool:
     calibration = result.calibration
     return result.calibration_failure is None and (calibration is None
                                                    or (calibration.converged and not calibration.at_bound))
+
+
+def _say_no_report(progress: Console, args: argparse.Namespace, log_path: Path) -> None:
+    """A stopped session writes no ``--report`` (it is the finished session's): say so,
+    and, when the log holds finished sweep steps to report on, the command that writes
+    it from the log (replay with the live settings reproduces the live estimates)."""
+    if args.report is None:
+        return
+    line = f"no report written to {args.report}: the session was stopped before its end"
+    if _has_sweep_steps(log_path):
+        format_words = () if args.figure_format == "png" else ("--format", args.figure_format)
+        line += (f"; {command('replay', log_path, '--online', '--report', args.report, *format_words)} writes it "
+                 "from the log's finished steps")
+    else:
+        line += ", and its log holds no finished sweep step to report on"
+    progress.print(f"[yellow]warning:[/] {render.plain(line)}", highlight=False, soft_wrap=True)
+
+
+def _has_sweep_steps(log_path: Path) -> bool:
+    """Whether the session log holds a finished step of a sweep (what a report is of)."""
+    from ..logs import read_log
+    from ..logs.topics import Step
+
+    try:
+        return any(step.sweep >= 0 for step in read_log(log_path, topics=[Step.topic]).on(Step))
+    except (UserError, OSError):  # no log, or one cut before it held anything
+        return False
 
 
 def _foxglove(address: str | None) -> contextlib.AbstractContextManager:

@@ -73,6 +73,45 @@ def test_a_signal_stops_the_session_cleanly(tmp_path, signal_number, exit_code):
                                                                                   "acknowledged ALL_OFF")
 
 
+def test_an_interrupted_session_says_it_wrote_no_report_and_what_writes_it(tmp_path):
+    report = tmp_path / "report"
+    process, log_path = start_run(tmp_path, "--report", str(report))
+    try:
+        deadline = time.monotonic() + 120
+        while not (log_path.exists() and read_log(log_path, topics=[Step.topic]).on(Step)):
+            assert time.monotonic() < deadline, "no step finished"
+            time.sleep(0.5)
+        process.send_signal(signal.SIGINT)
+        output, _ = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert process.returncode == 130, output
+    replay = f"hydrojet-bench replay {log_path} --online --report {report}"
+    assert (f"warning: no report written to {report}: the session was stopped before its end; {replay} writes it "
+            "from the log's finished steps") in " ".join(output.split()), output
+    assert not list(report.glob("*"))
+    from hydrojet_bench.cli import main
+
+    assert main(replay.split()[1:]) == 0  # as printed
+    assert list(report.glob("*.png"))
+
+
+def test_a_session_stopped_before_any_sweep_step_offers_no_replay_for_its_report(tmp_path):
+    import argparse
+
+    from hydrojet_bench.commands.run import _say_no_report
+
+    console = Console(record=True, width=300)
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")  # reserved, and stopped before the session wrote to it
+    _say_no_report(console, argparse.Namespace(report=tmp_path / "r", figure_format="png"), empty)
+    assert console.export_text().strip() == (f"warning: no report written to {tmp_path / 'r'}: the session was "
+                                             "stopped before its end, and its log holds no finished sweep step to "
+                                             "report on")
+
+
 def test_a_closed_terminal_stops_the_session_cleanly(tmp_path):
     """ssh or the terminal window closed under the live view: the kernel hangs up the
     terminal (a write to it fails from then on) and sends SIGHUP. The session still closes
