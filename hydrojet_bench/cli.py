@@ -44,6 +44,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     for name in (first,) if first in COMMAND_MODULES else COMMAND_MODULES:
         importlib.import_module(f"{__package__}.commands.{name}").register(subparsers)
     render.add_exit_codes(parser, {1: "a result that is no answer (replay: errors not finite; batch, study: a log or cell failed)",
+                                   129: "run stopped by SIGHUP (terminal closed; valves closed, log finished)",
                                    143: "run stopped by SIGTERM (valves closed, log finished)"})
     for command in _all_subparsers(parser):
         if "exit codes:" not in (command.epilog or ""):

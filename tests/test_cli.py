@@ -113,6 +113,25 @@ def test_run_options_are_blamed_not_the_profile(tmp_path, capsys, options, expec
     assert not (tmp_path / "x.mcap").exists()
 
 
+def test_a_rig_with_a_real_device_runs_on_wall_time(tmp_path, capsys):
+    """The sim profile with its valves on an external board: x25 from the parent profile
+    is refused where the profile loads (naming both files), and --time-scale on a rig
+    with a real device, though the others are emulated."""
+    profile = tmp_path / "board.toml"
+    profile.write_text('extends = "sim"\n[transports]\nvalves = "pty:///dev/pts/9"\n')
+    command = ["run", "--profile", str(profile), "--plan", "hold:2", "--no-live", "--skip-checks",
+               "--log", str(tmp_path / "x.mcap")]
+    message = one_line_error(capsys, command)
+    assert message.startswith(f"{PROFILES_DIR / 'sim.toml'} (extended by {profile}): session.time_scale = 25, but "
+                              "transports.valves = 'pty:///dev/pts/9' is a real device"), message
+    profile.write_text(profile.read_text() + "[session]\ntime_scale = 1.0\n")
+    message = one_line_error(capsys, [*command, "--time-scale", "25"])
+    assert message == (f"--time-scale 25: {profile} drives a real device (transports.valves = 'pty:///dev/pts/9'), "
+                       "and a rig with any real device runs on wall time (only the fully simulated rig takes "
+                       "--time-scale)")
+    assert not (tmp_path / "x.mcap").exists()
+
+
 def test_a_plan_step_held_for_ever_is_refused_before_the_session(tmp_path, capsys):
     plan = tmp_path / "plan.csv"
     plan.write_text("q1,q2,q3,settle_s,sweep,step\n0.05,0,0,1e300,0,0\n")
@@ -153,7 +172,8 @@ def test_the_physical_rig_profile_without_its_i2c_bus_is_one_line(tmp_path, caps
 @pytest.mark.parametrize("key", ["tracker", "valves"])
 def test_a_serial_port_that_cannot_be_opened_names_the_profile_key(tmp_path, capsys, key):
     profile = tmp_path / "port.toml"
-    profile.write_text(f'extends = "sim"\n[transports]\n{key} = "serial:///dev/ttyNOPE"\n')
+    profile.write_text(f'extends = "sim"\n[transports]\n{key} = "serial:///dev/ttyNOPE"\n'
+                       "[session]\ntime_scale = 1.0\n")  # a real device runs on wall time
     plan = tmp_path / "plan.toml"
     plan.write_text(TWO_STEPS)
     message = one_line_error(capsys, ["run", "--profile", str(profile), "--plan", str(plan), "--no-live", "--log",

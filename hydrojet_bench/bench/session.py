@@ -192,6 +192,9 @@ class SessionResult:
     # is over the same span.
     time_scale_kept: float | None = None
     kept_wall_s: float = 0.0
+    # Why the calibration on the calibration poses failed (None if it did not run or
+    # succeeded): the session then estimated with its starting parameters.
+    calibration_failure: str | None = None
 
     def __repr__(self) -> str:
         # Short: Python 3.11's asyncio.run formats its main task, result included, on
@@ -221,6 +224,7 @@ class Session:
         self.params = request.params
         self.calibration: CalibrationResult | None = None
         self.calibration_warnings: tuple[str, ...] = ()
+        self.calibration_failure: str | None = None
         self.estimation: PathPredictor | None = None
         self.estimates: list[StepPrediction] = []
         self.settled_rows: list[Dataset] = []
@@ -228,8 +232,11 @@ class Session:
         self._log: LogWriter | None = None
         self._devices: SimulatedDevices | None = None
         self._stopping = False
+        # The IMUs' samples are counted as each drain of the FIFOs brings them, a batch
+        # of FIFO_DRAIN_SAMPLES: a plan step's window may hold a drain fewer.
         self._rates = {"em": StreamRateMeter("em", request.settings.tracker.rate_hz),
-                       "imu": StreamRateMeter("imu", output_rate_hz(request.settings.imu.rate_hz))}
+                       "imu": StreamRateMeter("imu", output_rate_hz(request.settings.imu.rate_hz),
+                                              quantum=FIFO_DRAIN_SAMPLES)}
         self._rate_warned: set[str] = set()
         # Settled steps waiting for their estimate, in plan order (`_estimate_steps`).
         self._to_estimate: asyncio.Queue[tuple[int, Dataset, float]] = asyncio.Queue()
@@ -305,7 +312,7 @@ class Session:
                              tuple(self.estimates), steps, self._overall_rates, self.checks,
                              self.calibration_warnings, None if armed is None else armed[0],
                              None if armed is None else armed[1] - started,
-                             held_wall_s, kept, kept_wall_s)
+                             held_wall_s, kept, kept_wall_s, self.calibration_failure)
 
     def event(self, level: str, source: str, message: str) -> None:
         t_s = self.clock.now()
@@ -817,6 +824,7 @@ class Session:
             result = await asyncio.to_thread(calibrate_dataset, request.model, rows, self.params,
                                              request.calibration_names)
         except (ConvergenceError, ValueError) as error:
+            self.calibration_failure = str(error)
             self.event("error", "calibration", f"failed, keeping the starting parameters: {error}")
             return
         self.calibration = result

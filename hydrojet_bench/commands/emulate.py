@@ -27,6 +27,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="sim profile whose digital twin drives the emulator (default: sim)")
     parser.add_argument("--static", action="store_true",
                         help="serve a static pose instead of the digital twin")
+    # Ctrl-C is how an emulator is meant to stop (it serves until then; `drivers.*.serve`
+    # close the valves and the pty on it), so it is no interruption: exit 0, as the
+    # scripts and tests that start one and stop it expect.
+    render.add_exit_codes(parser, {0: "stopped by Ctrl-C while serving, its normal end (valves and pty closed; "
+                                      "130 is Ctrl-C before it serves)"})
     parser.set_defaults(func=run)
 
 

@@ -4,7 +4,8 @@ Plays a plan (default: the paper's protocol, 40 calibration poses then nine swee
 calibrates on the calibration poses when they end, estimates the disturbance live,
 records everything to an MCAP log, shows a live view, and at the end prints the paper's
 Table II for the session (optionally a report folder of plots) and the commands to try
-next. Ctrl-C or SIGTERM stop it cleanly: valves off, log finished.
+next. Ctrl-C, SIGTERM or SIGHUP (its terminal or ssh connection closed) stop it cleanly:
+valves off, log finished.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import os
 import shlex
 import signal
 import sys
@@ -30,6 +32,7 @@ from ..model_choice import ModelDefaults, model_choice
 from ..plans import clipped_warning, short_steps_warning
 from ..profile import load_profile
 from . import render
+from .calibrate import UNTRUSTED
 from .common import add_model_arguments, check_seed
 from .figure_options import add_format_argument
 from .next_steps import command
@@ -38,6 +41,10 @@ if TYPE_CHECKING:
     from ..bench.foxglove_live import FoxgloveLive
 
 DEFAULT_LOG_DIR = Path("sessions")
+# Signals that stop a session as Ctrl-C does (valves closed, log finished), exiting with
+# 128 + the signal's number as a shell reports a process it ended: SIGTERM (kill, a
+# service manager) and SIGHUP (the terminal or ssh connection closed).
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 FOXGLOVE_PORT = 8765  # Foxglove's and Lichtblick's default for a WebSocket connection
 
 
@@ -69,7 +76,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                      "its Table II and the next commands to standard output.")
     parser.add_argument("--skip-checks", action="store_true",
                         help="skip the wiring and level checks before the plan (the log records the skip)")
-    render.add_exit_codes(parser, {143: "stopped by SIGTERM (valves closed, log finished)"})
+    render.add_exit_codes(parser, {UNTRUSTED: "the session's calibration failed, did not converge or left a value on "
+                                              "a bound (the session ran on; its warnings say which, and its Table II "
+                                              "is not that of a calibrated model)",
+                                   128 + signal.SIGHUP: "stopped by SIGHUP: its terminal or ssh connection "
+                                                        "closed (valves closed, log finished)",
+                                   128 + signal.SIGTERM: "stopped by SIGTERM (valves closed, log finished)"})
     parser.set_defaults(func=run)
 
 
@@ -91,9 +103,13 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
             raise UserError(f"--time-scale must be at least {MIN_TIME_SCALE:g} (real time: the devices' timeouts "
                             f"are wall time) and at most {MAX_TIME_SCALE:g} (the simulated rig cannot keep up "
                             f"beyond), got {args.time_scale}")
-        if not settings.transports.simulated and args.time_scale != 1.0:
-            raise UserError(f"--time-scale applies to the simulated rig only; {profile.source} drives real devices "
-                            "([transports])")
+        real = settings.transports.real_devices()
+        if real and args.time_scale != 1.0:
+            # The clock runs on wall time with any real device (`Session`): the same rule
+            # as the profile's [session] time_scale.
+            raise UserError(f"--time-scale {args.time_scale:g}: {profile.source} drives a real device ({real[0]}), "
+                            "and a rig with any real device runs on wall time (only the fully simulated rig "
+                            "takes --time-scale)")
         settings = msgspec.structs.replace(settings, session=msgspec.structs.replace(settings.session,
                                                                                      time_scale=args.time_scale))
     limits = tuple(table.max_force_n for table in settings.valve_calibrations())
@@ -125,7 +141,8 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
                              setup_checks=not args.skip_checks)
     console = render.console_for(args)
     progress = render.progress_console()
-    rig = "simulated rig" if settings.transports.simulated else "rig"
+    rig = ("simulated rig" if settings.transports.all_simulated
+           else "rig, some devices emulated" if settings.transports.simulated else "rig")
     console.print(f"session on [bold]{render.plain(profile.name)}[/] ({rig}): "
                   f"{len(plan)} steps, {plan.duration_s:.0f} s of session time at x{settings.session.time_scale:g}, "
                   f"model {model.name}{' + ' + ', '.join(e.name for e in requested) if requested else ''}; "
@@ -143,12 +160,50 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
     except KeyboardInterrupt:
         # The session has closed the valves and finished its log on the way out.
         progress.print(f"[yellow]interrupted:[/] valves closed, log finished: {render.plain(log_path)}")
+        _say_no_report(progress, args, log_path)
         return 130
-    if result is None:
-        progress.print(f"[yellow]stopped by signal:[/] valves closed, log finished: {render.plain(log_path)}")
-        return 143
+    if isinstance(result, signal.Signals):
+        progress.print(f"[yellow]stopped by {result.name}:[/] valves closed, log finished: {render.plain(log_path)}")
+        _say_no_report(progress, args, log_path)
+        return 128 + result
     _print_outcome(console, progress, result, model.name, args)
-    return 0
+    return 0 if _calibration_trusted(result) else UNTRUSTED
+
+
+def _calibration_trusted(result) -> bool:
+    """Whether the session's calibration, if it ran, left parameters to trust: it did
+    not fail and, as `calibrate` and `replay` judge theirs, its fit converged with no
+    value on a bound."""
+    calibration = result.calibration
+    return result.calibration_failure is None and (calibration is None
+                                                   or (calibration.converged and not calibration.at_bound))
+
+
+def _say_no_report(progress: Console, args: argparse.Namespace, log_path: Path) -> None:
+    """A stopped session writes no ``--report`` (it is the finished session's): say so,
+    and, when the log holds finished sweep steps to report on, the command that writes
+    it from the log (replay with the live settings reproduces the live estimates)."""
+    if args.report is None:
+        return
+    line = f"no report written to {args.report}: the session was stopped before its end"
+    if _has_sweep_steps(log_path):
+        format_words = () if args.figure_format == "png" else ("--format", args.figure_format)
+        line += (f"; {command('replay', log_path, '--online', '--report', args.report, *format_words)} writes it "
+                 "from the log's finished steps")
+    else:
+        line += ", and its log holds no finished sweep step to report on"
+    progress.print(f"[yellow]warning:[/] {render.plain(line)}", highlight=False, soft_wrap=True)
+
+
+def _has_sweep_steps(log_path: Path) -> bool:
+    """Whether the session log holds a finished step of a sweep (what a report is of)."""
+    from ..logs import read_log
+    from ..logs.topics import Step
+
+    try:
+        return any(step.sweep >= 0 for step in read_log(log_path, topics=[Step.topic]).on(Step))
+    except (UserError, OSError):  # no log, or one cut before it held anything
+        return False
 
 
 def _foxglove(address: str | None) -> contextlib.AbstractContextManager:
@@ -167,16 +222,21 @@ async def _run_session(request, console: Console, live: bool, clipped: frozenset
     from ..bench.live_view import LiveView
     from ..bench.session import Session
 
-    terminated = False
+    stopped_by: signal.Signals | None = None
     task = asyncio.current_task()
     loop = asyncio.get_running_loop()
+    terminals = _terminals()
 
-    def on_sigterm() -> None:
-        nonlocal terminated
-        terminated = True
-        task.cancel()
+    def on_signal(number: signal.Signals) -> None:
+        nonlocal stopped_by
+        if number == signal.SIGHUP:
+            _away_from_lost_terminal(terminals)
+        if stopped_by is None:  # cancelled once: a second signal changes nothing
+            stopped_by = number
+            task.cancel()
 
-    loop.add_signal_handler(signal.SIGTERM, on_sigterm)
+    for number in STOP_SIGNALS:
+        loop.add_signal_handler(number, on_signal, number)
     view_context = LiveView(console, request.settings.session.time_scale, f"HydroJet bench: {request.profile.name}") \
         if live else contextlib.nullcontext()
     try:
@@ -185,12 +245,39 @@ async def _run_session(request, console: Console, live: bool, clipped: frozenset
             session = Session(request, on_update=on_update, on_log_message=on_log_message)
             return await session.run()
     except asyncio.CancelledError:
-        if terminated:
+        if stopped_by is not None:
             task.uncancel()
-            return None
+            return stopped_by
         raise
     finally:
-        loop.remove_signal_handler(signal.SIGTERM)
+        for number in STOP_SIGNALS:
+            loop.remove_signal_handler(number)
+
+
+def _terminals() -> list[int]:
+    """The descriptors of standard output and error that are a terminal, taken before any
+    hangup: after one, ``isatty`` says no more."""
+    found = []
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            fd = stream.fileno()
+        except (AttributeError, OSError, ValueError):  # replaced by an object without one (a test's capture)
+            continue
+        if os.isatty(fd):
+            found.append(fd)
+    return found
+
+
+def _away_from_lost_terminal(terminals: list[int]) -> None:
+    """Point these descriptors (standard output and error that were a terminal) at
+    /dev/null: a write to a hung-up terminal fails (EIO), and the live view's or the
+    summary's would stop the way out halfway (the valves' ALL_OFF, the log's end)."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for fd in terminals:
+            os.dup2(devnull, fd)
+    finally:
+        os.close(devnull)
 
 
 # Event sources whose warnings the command prints itself, before the session or in its
@@ -272,6 +359,10 @@ def _print_outcome(console: Console, warnings: Console, result, model_name: str,
     if result.calibration is not None:
         console.print(f"calibration on the calibration poses: RMS {result.calibration.rms_orientation_deg_before:.2f} deg "
                       f"-> {result.calibration.rms_orientation_deg_after:.2f} deg")
+    if result.calibration_failure is not None:
+        warnings.print(f"[yellow]warning:[/] the calibration on the calibration poses failed: "
+                       f"{render.plain(result.calibration_failure)}; the session predicted and estimated with its "
+                       "starting parameters, so its errors are not those of a calibrated model", highlight=False)
     for warning in result.calibration_warnings:
         warnings.print(f"[yellow]warning:[/] {render.plain(warning)}")
     for rate in result.stream_rates:
@@ -303,8 +394,9 @@ def _print_outcome(console: Console, warnings: Console, result, model_name: str,
                            "sweeps' Table II and figures, and this session has no sweep steps")
     log = result.log_path
     console.print("\nnext:")
-    # Only what runs on this log: calibrate needs calibration poses, diagnose sweeps too.
-    poses = steps is not None and bool((steps.sweep == -1).any())
+    # Only what runs on this log: calibrate needs calibration poses, diagnose sweeps too;
+    # poses the session's own calibration failed on fail `calibrate` the same way.
+    poses = steps is not None and bool((steps.sweep == -1).any()) and result.calibration_failure is None
     diagnosable = steps is not None and _diagnosable(steps)
     for line in (f"{command('replay', log, '--online')}  # re-run the estimation offline",
                  *([f"{command('calibrate', log, '-o', 'p.toml')}  # calibrate on the logged poses",

@@ -262,7 +262,19 @@ class TransportsTable(Table, kw_only=True):
     @property
     def all_simulated(self) -> bool:
         """True when every device is emulated on the session clock, none is real."""
-        return self.valves in (SIM, PTY) and self.tracker in (SIM, PTY) and self.imu_bus == SIM
+        return not self.real_devices()
+
+    def real_devices(self) -> tuple[str, ...]:
+        """Each device that is a real byte stream (a transport URL, a pty or serial port,
+        an I2C bus), as ``transports.KEY = value``; none on the simulated rig ("pty"
+        alone is the in-process emulator on a pseudo-terminal, which runs on the
+        session clock)."""
+        found = [f"transports.{name} = {value!r}" for name, value in (("valves", self.valves),
+                                                                     ("tracker", self.tracker))
+                 if value not in (SIM, PTY)]
+        if self.imu_bus != SIM:
+            found.append(f"transports.imu_bus = {self.imu_bus!r}")
+        return tuple(found)
 
 
 # The sensors the simulated rig's tracker has (the twin's).
@@ -387,7 +399,7 @@ class SessionTable(Table, kw_only=True):
     # hold each command this long, session s (the paper: 5 s; at most a day, as in plans)
     settle_s: Annotated[float, msgspec.Meta(gt=0.0, le=MAX_SETTLE_S)] = 5.0
     window_s: Positive = 1.0          # average the last window_s of each step, session s
-    # session seconds per wall second (> 1 only on the sim rig)
+    # session seconds per wall second (> 1 only when no [transports] device is real)
     time_scale: Annotated[float, msgspec.Meta(ge=MIN_TIME_SCALE, le=MAX_TIME_SCALE)] = 1.0
     # Log flush period, session s: what a crash may lose. The session's log compresses
     # and indexes each chunk on its writer thread, which holds the interpreter for part
@@ -525,6 +537,13 @@ class RigConfig(Table, kw_only=True):
         if self.session.window_s < 2.0 / slowest_hz:
             raise ValueError(f"session.window_s = {self.session.window_s:g} s holds fewer than two samples of the "
                              f"slowest stream ({stream} = {slowest_hz:g}): make it at least {2.0 / slowest_hz:g} s")
+        real = self.transports.real_devices()
+        if real and self.session.time_scale != 1.0:
+            # A real device keeps wall time (its firmware watchdog, the Aurora's frames):
+            # a faster session clock would hold each command a fraction of its settle_s.
+            raise ValueError(f"session.time_scale = {self.session.time_scale:g}, but {real[0]} is a real device, "
+                             "and a rig with any real device runs on wall time: set time_scale = 1 under [session] in the "
+                             "profile that names the device (only the fully simulated rig runs faster)")
         extra_tools = [tool for tool in self.tracker.tools if tool not in SIMULATED_TOOLS]
         if self.transports.tracker in (SIM, PTY) and extra_tools:
             raise ValueError(f"tracker.tools names {', '.join(map(repr, extra_tools))}, but the simulated tracker "

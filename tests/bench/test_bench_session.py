@@ -338,6 +338,24 @@ def test_imu_samples_keep_their_rate_through_the_fifo(finished_session):
     assert np.all(gaps > 0)
 
 
+def test_an_imu_step_a_fifo_drain_short_is_no_stream_falling_behind(tmp_path):
+    """The IMUs are counted a FIFO drain (5 samples, 0.5 s at 10 Hz) at a time: a 1.3 s
+    step holds 10 or 15 samples where 13 are due, and 10 (77 %) warned "falling behind"
+    while the stream kept its rate."""
+    log_path = tmp_path / "short.mcap"
+    request = make_request(log_path, plan=calibration_plan(6, settle_s=1.3, seed=2), calibrate=False,
+                           setup_checks=False)
+    result = asyncio.run(run_without_leaks(Session(request)))
+    rates = {rate.stream: rate for rate in result.stream_rates}
+    assert rates["imu"].fraction > 0.95
+    contents = read_log(log_path)
+    steps = [m for m in contents.messages if m.topic == "/bench/stream_rate" and m.stream == "imu"
+             and not m.whole_session]
+    assert len(steps) == len(request.plan) and any(m.samples < 0.95 * m.configured_hz * m.interval_s for m in steps)
+    events = [m.message for m in contents.on(Event) if m.source == "imu"]
+    assert not [message for message in events if message.startswith("falling behind")], events
+
+
 def test_log_is_written_in_time_order(finished_session):
     """Every channel's log time runs forward and chunks cover disjoint time ranges, however
     late a sample or a prediction reaches the writer."""

@@ -66,13 +66,16 @@ def test_sigkill_of_the_bench_closes_the_valves_and_leaves_a_recoverable_log(tmp
         # No gyro-bias sampling at start-up: at x1 it holds the bench 20 s (100 samples a
         # chip at 10 Hz) before the valves are armed, and the IMUs are not under test.
         assert "\n[imu]\n" in sim
+        # A real device in the loop: the session runs on wall time.
+        assert "time_scale = 25.0" in sim
         profile.write_text(sim.replace('valves = "sim"', f'valves = "pty://{pty_path}"')
+                           .replace("time_scale = 25.0", "time_scale = 1.0")
                            .replace("\n[imu]\n", "\n[imu]\ngyro_bias_samples = 0\n"))
         plan = tmp_path / "hold.toml"
         plan.write_text("[[step]]\nq1 = 0.06\nq2 = 0.0\nq3 = 0.0\nsettle_s = 120.0\n")
         log_path = tmp_path / "killed.mcap"
         bench_output = (tmp_path / "bench.txt").open("w")
-        bench = cli("run", "--profile", str(profile), "--plan", str(plan), "--time-scale", "1", "--no-live",
+        bench = cli("run", "--profile", str(profile), "--plan", str(plan), "--no-live",
                     "--skip-checks", "--log", str(log_path), stdout=bench_output, stderr=subprocess.STDOUT)
         duties, opened_at = next_valve_change(emulator_lines, timeout_s=120)
         assert duties[0] > 0, duties

@@ -118,3 +118,12 @@ def test_a_watchdog_the_firmware_cannot_hold_is_one_line(args, message, capsys):
 
     assert main(["emulate", *args]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_the_help_says_ctrl_c_is_the_emulators_normal_end():
+    """Its help listed 130 for Ctrl-C, while a stop by Ctrl-C, the only one it has, exits 0."""
+    done = subprocess.run([sys.executable, "-m", "hydrojet_bench.cli", "emulate", "--help"], capture_output=True,
+                          text=True, timeout=60)
+    text = " ".join(done.stdout.split())
+    assert done.returncode == 0 and ("exit codes: 0 done, or stopped by Ctrl-C while serving, its normal end "
+                                     "(valves and pty closed; 130 is Ctrl-C before it serves);") in text, text

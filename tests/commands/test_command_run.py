@@ -1,10 +1,15 @@
-"""`hydrojet-bench run` as a user starts it: a clean stop on SIGINT and SIGTERM (valves
+"""`hydrojet-bench run` as a user starts it: a clean stop on SIGINT, SIGTERM and SIGHUP (valves
 off, log finished), the live view, and clear errors for a user's mistakes."""
 
 from __future__ import annotations
 
+import fcntl
+import os
+import pty
+import select
 import signal
 import subprocess
+import termios
 import sys
 import time
 from pathlib import Path
@@ -28,10 +33,11 @@ def start_run(tmp_path: Path, *options: str) -> tuple[subprocess.Popen, Path]:
     return process, log_path
 
 
-def wait_for_commands(log_path: Path, timeout_s: float = 120.0) -> None:
+def wait_for_commands(log_path: Path, timeout_s: float = 120.0, while_waiting=lambda: None) -> None:
     """Until the session has opened a jet (its log shows a non-zero command)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
+        while_waiting()
         if log_path.exists():
             commands = [m.jet_forces_n for m in read_log(log_path, topics=["/valves/command"]).messages]
             if any(max(forces) > 0 for forces in commands):
@@ -40,7 +46,8 @@ def wait_for_commands(log_path: Path, timeout_s: float = 120.0) -> None:
     raise AssertionError("the session never commanded a jet")
 
 
-@pytest.mark.parametrize("signal_number, exit_code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+@pytest.mark.parametrize("signal_number, exit_code", [(signal.SIGINT, 130), (signal.SIGTERM, 143),
+                                                       (signal.SIGHUP, 129)])
 def test_a_signal_stops_the_session_cleanly(tmp_path, signal_number, exit_code):
     process, log_path = start_run(tmp_path)
     try:
@@ -64,6 +71,88 @@ def test_a_signal_stops_the_session_cleanly(tmp_path, signal_number, exit_code):
     # ...and the controller's acknowledgement of it, logged after the rig closed.
     assert [m.message for m in contents.on(Event) if m.source == "valves"][-1] == ("closed: the controller "
                                                                                   "acknowledged ALL_OFF")
+
+
+def test_an_interrupted_session_says_it_wrote_no_report_and_what_writes_it(tmp_path):
+    report = tmp_path / "report"
+    process, log_path = start_run(tmp_path, "--report", str(report))
+    try:
+        deadline = time.monotonic() + 120
+        while not (log_path.exists() and read_log(log_path, topics=[Step.topic]).on(Step)):
+            assert time.monotonic() < deadline, "no step finished"
+            time.sleep(0.5)
+        process.send_signal(signal.SIGINT)
+        output, _ = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert process.returncode == 130, output
+    replay = f"hydrojet-bench replay {log_path} --online --report {report}"
+    assert (f"warning: no report written to {report}: the session was stopped before its end; {replay} writes it "
+            "from the log's finished steps") in " ".join(output.split()), output
+    assert not list(report.glob("*"))
+    from hydrojet_bench.cli import main
+
+    assert main(replay.split()[1:]) == 0  # as printed
+    assert list(report.glob("*.png"))
+
+
+def test_a_session_stopped_before_any_sweep_step_offers_no_replay_for_its_report(tmp_path):
+    import argparse
+
+    from hydrojet_bench.commands.run import _say_no_report
+
+    console = Console(record=True, width=300)
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")  # reserved, and stopped before the session wrote to it
+    _say_no_report(console, argparse.Namespace(report=tmp_path / "r", figure_format="png"), empty)
+    assert console.export_text().strip() == (f"warning: no report written to {tmp_path / 'r'}: the session was "
+                                             "stopped before its end, and its log holds no finished sweep step to "
+                                             "report on")
+
+
+def test_a_closed_terminal_stops_the_session_cleanly(tmp_path):
+    """ssh or the terminal window closed under the live view: the kernel hangs up the
+    terminal (a write to it fails from then on) and sends SIGHUP. The session still closes
+    the valves and finishes its log, and exits 129."""
+    master, slave = pty.openpty()
+    log_path = tmp_path / "run.mcap"
+
+    def take_the_terminal() -> None:  # in the child, a session leader: the pty becomes its terminal
+        fcntl.ioctl(0, termios.TIOCSCTTY, 0)
+
+    process = subprocess.Popen([sys.executable, "-m", "hydrojet_bench.cli", "run", "--plan", "sweeps",
+                                "--time-scale", "5", "--log", str(log_path)], stdin=slave, stdout=slave,
+                               stderr=slave, start_new_session=True, preexec_fn=take_the_terminal)
+    os.close(slave)
+    try:
+        # The live view writes on: read it, or the terminal's buffer fills and stops the session.
+        wait_for_commands(log_path, while_waiting=lambda: _drain(master))
+        os.close(master)  # the hangup
+        master = None
+        process.wait(timeout=60)
+    finally:
+        if master is not None:
+            os.close(master)
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 129
+    contents = read_log(log_path)
+    assert not contents.truncated
+    assert any("interrupted" in m.message for m in contents.on(Event))
+    assert [m.message for m in contents.on(Event) if m.source == "valves"][-1] == ("closed: the controller "
+                                                                                  "acknowledged ALL_OFF")
+
+
+def _drain(fd: int) -> None:
+    while select.select([fd], [], [], 0)[0]:
+        try:
+            if not os.read(fd, 65536):
+                return
+        except OSError:  # the child's side closed
+            return
 
 
 def test_run_reports_a_bad_plan_file_without_traceback(tmp_path):
@@ -180,3 +269,21 @@ def test_next_offers_diagnose_only_on_steps_it_can_split():
     paper = twin.run_plan(paper_protocol(), record_window_s=1.0).to_dataset(profile).quasistatic_steps()
     ramps = twin.run_plan(imu_versus_em_plan(), record_window_s=1.0).to_dataset(profile).quasistatic_steps()
     assert _diagnosable(paper) and not _diagnosable(ramps)
+
+
+def test_a_failed_session_calibration_is_said_and_is_no_clean_exit(tmp_path, capsys):
+    """One calibration pose cannot determine nine parameters: the session runs on with its
+    starting parameters, and its summary says so (the log's event was all there was), the
+    exit is calibrate's for an untrusted fit, and "next" offers no calibrate that would fail."""
+    from hydrojet_bench.cli import main
+
+    plan = tmp_path / "one.csv"
+    plan.write_text("q1,q2,q3,sweep\n0.05,0,0,-1\n0.02,0,0,0\n0.04,0,0,0\n")
+    log = tmp_path / "one.mcap"
+    assert main(["run", "--plan", str(plan), "--no-live", "--skip-checks", "--time-scale", "20",
+                 "--log", str(log)]) == 3
+    out, err = capsys.readouterr()
+    assert ("warning: the calibration on the calibration poses failed: 1 poses cannot determine 9 parameters; the "
+            "session predicted and estimated with its starting parameters") in " ".join(err.split())
+    assert "RMS errors" in out  # Table II of the sweep steps all the same
+    assert f"replay {log} --online" in out and "calibrate" not in out and "--params p.toml" not in out
