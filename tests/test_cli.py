@@ -115,15 +115,15 @@ def test_run_options_are_blamed_not_the_profile(tmp_path, capsys, options, expec
 
 def test_a_rig_with_a_real_device_runs_on_wall_time(tmp_path, capsys):
     """The sim profile with its valves on an external board: x25 from the parent profile
-    is refused where the profile loads (naming both files), and --time-scale on a rig
-    with a real device, though the others are emulated."""
+    is refused where the profile loads (naming the file that names the device), and
+    --time-scale on a rig with a real device, though the others are emulated."""
     profile = tmp_path / "board.toml"
     profile.write_text('extends = "sim"\n[transports]\nvalves = "pty:///dev/pts/9"\n')
     command = ["run", "--profile", str(profile), "--plan", "hold:2", "--no-live", "--skip-checks",
                "--log", str(tmp_path / "x.mcap")]
     message = one_line_error(capsys, command)
-    assert message.startswith(f"{PROFILES_DIR / 'sim.toml'} (extended by {profile}): session.time_scale = 25, but "
-                              "transports.valves = 'pty:///dev/pts/9' is a real device"), message
+    assert message.startswith(f"{profile}: transports.valves = 'pty:///dev/pts/9' is a real device, and a rig with "
+                              "any real device runs on wall time, but session.time_scale = 25"), message
     profile.write_text(profile.read_text() + "[session]\ntime_scale = 1.0\n")
     message = one_line_error(capsys, [*command, "--time-scale", "25"])
     assert message == (f"--time-scale 25: {profile} drives a real device (transports.valves = 'pty:///dev/pts/9'), "

@@ -200,11 +200,11 @@ def test_the_shipped_physical_rig_with_a_misspelt_table_does_not_load(tmp_path: 
     ("[session]\nflush_interval_s = 1e9\n", "session.flush_interval_s", "must be a number > 0 and <= 60, got 1000000000.0"),
     ("[transports]\nimu_bus = -1\n", "transports.imu_bus", "I2C bus number"),
     # A real device keeps wall time: a faster session clock would cut every hold short.
-    ('[transports]\nvalves = "pty:///dev/pts/9"\n[session]\ntime_scale = 25.0\n', "session.time_scale",
-     "= 25, but transports.valves = 'pty:///dev/pts/9' is a real device, and a rig with any real device runs on "
-     "wall time"),
-    ("[transports]\nimu_bus = 1\n[session]\ntime_scale = 2.0\n", "session.time_scale",
-     "transports.imu_bus = 1 is a real device"),
+    ('[transports]\nvalves = "pty:///dev/pts/9"\n[session]\ntime_scale = 25.0\n', "transports.valves",
+     "= 'pty:///dev/pts/9' is a real device, and a rig with any real device runs on wall time, but "
+     "session.time_scale = 25: set time_scale = 1 under [session]"),
+    ("[transports]\nimu_bus = 1\n[session]\ntime_scale = 2.0\n", "transports.imu_bus",
+     "= 1 is a real device, and a rig with any real device runs on wall time, but session.time_scale = 2"),
     ('[tracker]\ntools = ["base", "base"]\n', "tracker.tools", 'each of "base" and "tip" once'),
     ("[imu]\nbase_address = 0x69\n", "imu.tip_address", "must differ from imu.base_address"),
     ("[imu]\nbase_address = 0x70\n", "imu.base_address", "must be 0x68 or 0x69 (the ICM-20948's AD0 pin low or "

@@ -24,7 +24,6 @@ from ..analysis.sensors import (AXES, DEFAULT_MIN_HOLD_S, DEFAULT_SETTLE_S, FRAM
                                 compare_estimators, hold_label, imu_profile, sensor_agreement)
 from ..data.dataset import Dataset
 from ..errors import ConvergenceError, UserError
-from ..estimation import OnlineSettings
 from ..estimation.calibration import CalibrationResult, calibrate_dataset
 from ..estimation.setup_warnings import calibration_warnings
 from ..logs import read_log
@@ -228,7 +227,7 @@ def estimate(args: argparse.Namespace, choice: ModelChoice, params: ModelParamet
         for warning in calibration_warnings(model, calibration):
             render.progress_console().print(f"[yellow]warning:[/] {render.plain(warning)}")
     try:
-        comparison = compare_estimators(model, params, em_steps, imu_steps, OnlineSettings())
+        comparison = compare_estimators(model, params, em_steps, imu_steps, em.profile.online_settings())
     except ValueError as error:
         raise UserError(f"{args.input}: {error}") from None
     except ConvergenceError as error:

@@ -541,9 +541,11 @@ class RigConfig(Table, kw_only=True):
         if real and self.session.time_scale != 1.0:
             # A real device keeps wall time (its firmware watchdog, the Aurora's frames):
             # a faster session clock would hold each command a fraction of its settle_s.
-            raise ValueError(f"session.time_scale = {self.session.time_scale:g}, but {real[0]} is a real device, "
-                             "and a rig with any real device runs on wall time: set time_scale = 1 under [session] in the "
-                             "profile that names the device (only the fully simulated rig runs faster)")
+            # Said from the device's key: the profile that names it is the one to fix,
+            # whichever file the time scale came from (sim.toml's x25, extended).
+            raise ValueError(f"{real[0]} is a real device, and a rig with any real device runs on wall time, but "
+                             f"session.time_scale = {self.session.time_scale:g}: set time_scale = 1 under [session] "
+                             "(only the fully simulated rig runs faster)")
         extra_tools = [tool for tool in self.tracker.tools if tool not in SIMULATED_TOOLS]
         if self.transports.tracker in (SIM, PTY) and extra_tools:
             raise ValueError(f"tracker.tools names {', '.join(map(repr, extra_tools))}, but the simulated tracker "
