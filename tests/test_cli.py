@@ -172,8 +172,9 @@ def test_the_physical_rig_profile_without_its_i2c_bus_is_one_line(tmp_path, caps
 @pytest.mark.parametrize("key", ["tracker", "valves"])
 def test_a_serial_port_that_cannot_be_opened_names_the_profile_key(tmp_path, capsys, key):
     profile = tmp_path / "port.toml"
+    # A real device runs on wall time; no gyro-bias wait at that pace before the port opens.
     profile.write_text(f'extends = "sim"\n[transports]\n{key} = "serial:///dev/ttyNOPE"\n'
-                       "[session]\ntime_scale = 1.0\n")  # a real device runs on wall time
+                       "[session]\ntime_scale = 1.0\n[imu]\ngyro_bias_samples = 0\n")
     plan = tmp_path / "plan.toml"
     plan.write_text(TWO_STEPS)
     message = one_line_error(capsys, ["run", "--profile", str(profile), "--plan", str(plan), "--no-live", "--log",

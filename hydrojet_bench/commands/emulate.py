@@ -30,8 +30,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     # Ctrl-C is how an emulator is meant to stop (it serves until then; `drivers.*.serve`
     # close the valves and the pty on it), so it is no interruption: exit 0, as the
     # scripts and tests that start one and stop it expect.
-    render.add_exit_codes(parser, {0: "stopped by Ctrl-C while serving, its normal end (valves and pty closed; "
-                                      "130 is Ctrl-C before it serves)"})
+    render.add_exit_codes(parser, replacing={130: "interrupted (Ctrl-C) before it serves; Ctrl-C while it serves "
+                                                  "is its normal end, exit 0 (valves and pty closed)"})
     parser.set_defaults(func=run)
 
 

@@ -46,10 +46,12 @@ def add_json_argument(parser: argparse.ArgumentParser, what: str = "the figures"
                         help=f"write {what} as JSON to PATH (- for standard output)")
 
 
-def add_exit_codes(parser: argparse.ArgumentParser, codes: dict[int, str] | None = None) -> None:
+def add_exit_codes(parser: argparse.ArgumentParser, codes: dict[int, str] | None = None,
+                   replacing: dict[int, str] | None = None) -> None:
     """State the exit codes at the end of ``parser``'s help: the common ones and, in
-    ``codes``, those the command adds (or another meaning of a common one)."""
-    described = dict(EXIT_CODES)
+    ``codes``, those the command adds (or another meaning of a common one); in
+    ``replacing``, what a common one means instead for this command."""
+    described = {**EXIT_CODES, **(replacing or {})}
     for code, meaning in (codes or {}).items():
         described[code] = f"{described[code]}, or {meaning}" if code in described else meaning
     text = "exit codes: " + "; ".join(f"{code} {described[code]}" for code in sorted(described)) + "."

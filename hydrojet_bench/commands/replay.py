@@ -21,7 +21,7 @@ from . import render
 from .calibrate import UNTRUSTED, calibration_exit_code
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
 from .figure_options import add_format_argument
-from .log_notice import warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere
+from .log_notice import warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_scored_on_own_fit
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -49,8 +49,11 @@ def run(args: argparse.Namespace) -> int:
     profile_mismatch = (None if args.profile is None
                         else warn_if_recorded_elsewhere(args.input, args.profile, load_profile(args.profile)))
     # Parameters calibrated on this log's sweeps replay training errors, not held-out ones.
-    fitted_on = None if args.params is None else warn_if_fitted_on(choose_model(None, (), args.params), args.input,
-                                                                     result.steps)
+    # So do those calibrated here on its poses when it has no sweeps to hold out.
+    if args.params is not None:
+        fitted_on = warn_if_fitted_on(choose_model(None, (), args.params), args.input, result.steps)
+    else:
+        fitted_on = None if result.calibration is None else warn_if_scored_on_own_fit(args.input, result.steps)
     console = render.console_for(args)
     warnings = render.progress_console()
     model = result.model

@@ -125,5 +125,5 @@ def test_the_help_says_ctrl_c_is_the_emulators_normal_end():
     done = subprocess.run([sys.executable, "-m", "hydrojet_bench.cli", "emulate", "--help"], capture_output=True,
                           text=True, timeout=60)
     text = " ".join(done.stdout.split())
-    assert done.returncode == 0 and ("exit codes: 0 done, or stopped by Ctrl-C while serving, its normal end "
-                                     "(valves and pty closed; 130 is Ctrl-C before it serves);") in text, text
+    assert done.returncode == 0 and ("; 130 interrupted (Ctrl-C) before it serves; Ctrl-C while it serves is its "
+                                     "normal end, exit 0 (valves and pty closed);") in text, text

@@ -211,6 +211,12 @@ def test_scoring_the_poses_fitted_says_the_errors_are_training_errors(session_lo
             "are training errors, not held-out ones") in warnings
     assert json.loads(out.read_text())["online_estimation"]["held_out"] is False
 
+    # replay with another model calibrates it here on the same poses: the same words.
+    assert main(["replay", str(poses_log), "--model", "prb", "--json", str(out)]) in (0, 3)
+    warnings = " ".join(capsys.readouterr().err.split())
+    assert f"the model was calibrated here on the calibration poses of {poses_log}" in warnings
+    assert "training errors, not held-out ones" in warnings and json.loads(out.read_text())["held_out"] is False
+
 
 def test_an_unconverged_own_calibration_exits_3_as_calibrate_and_replay_do(session_log, tmp_path, capsys,
                                                                          monkeypatch):
