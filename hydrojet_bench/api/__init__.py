@@ -152,7 +152,7 @@ def replay(log: str | Path, *, model: str | None = None, effects: Sequence[str] 
     (``live_difference_deg`` 0); another model or effects without ``params`` are first
     calibrated on the logged calibration poses."""
     session = read_session(Path(log), profile)
-    choice = _choice(model, effects, params, ModelDefaults(session.model_name, session.effects))
+    choice = _choice(model, effects, params, session.model_defaults())
     nominal = session.profile.model_parameters()
     values = None if params is None else choice.parameters(nominal)
     live_settings = values is None and choice.model.name == session.model_name and not effects

@@ -11,7 +11,6 @@ parameters it answers "what would this model have done on that session".
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,8 +21,9 @@ from ..errors import ConvergenceError, UserError
 from ..estimation.online import OnlineSettings
 from ..estimation.path import PathPredictor, StepPrediction
 from ..logs import read_log
-from ..logs.dataset import rig_profile_of_log
+from ..logs.dataset import logged_model, rig_profile_of_log
 from ..logs.topics import ModelPrediction, Parameters, Step
+from ..model_choice import ModelDefaults
 from ..models.shooting import ShootingModel
 from ..params import ModelParameters, with_parameters
 from ..params_io import check_values_for
@@ -61,6 +61,10 @@ class LoggedSession:
     parameters: tuple[ParameterRecord, ...]
     live_errors: dict[tuple[int, str], float]
 
+    def model_defaults(self) -> ModelDefaults:
+        """The model the session ran, named by the log in errors."""
+        return ModelDefaults(self.model_name, self.effects, origin=f"{self.path}, metadata bench.model/effects")
+
 
 def read_session(path: Path, profile: RigProfile | str | Path | None = None) -> LoggedSession:
     """The settled steps, parameter timeline and live predictions of a session log."""
@@ -91,11 +95,11 @@ def read_session(path: Path, profile: RigProfile | str | Path | None = None) -> 
                         profile=rig, source=str(path))
     except ValueError as error:
         raise UserError(f"{path}: {STEP_TOPIC} messages are not complete settled steps ({error})") from None
-    bench = contents.metadata.get("bench", {})
+    model_name, effects = logged_model(path, contents.metadata)
     parameters = tuple(ParameterRecord(message.t_s, dict(message.parameters), message.calibrated)
                        for message in contents.on(Parameters))
     live = {(m.index, m.method): m.orientation_error_deg for m in contents.on(ModelPrediction)}
-    return LoggedSession(Path(path), rig, bench.get("model", "cosserat"), tuple(json.loads(bench.get("effects", "[]"))),
+    return LoggedSession(Path(path), rig, model_name, effects,
                          steps, np.array([row.index for row in records]), np.array([r.t_s for r in records]),
                          parameters, live)
 

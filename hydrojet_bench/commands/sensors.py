@@ -12,7 +12,6 @@ orientations, each scored against the EM measurement beside Ref.
 from __future__ import annotations
 
 import argparse
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,7 +26,7 @@ from ..errors import ConvergenceError, UserError
 from ..estimation.calibration import CalibrationResult, calibrate_dataset
 from ..estimation.setup_warnings import calibration_warnings
 from ..logs import read_log
-from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log, em_frame_numbers, empty_note
+from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log, em_frame_numbers, empty_note, logged_model
 from ..logs.topics import EmFrame, Sample
 from ..model_choice import ModelChoice, ModelDefaults, model_choice
 from ..params import ModelParameters
@@ -77,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     render.check_json_output(args.json)
     sources = load_sources(args.input, args.profile)
     em, imu = sources.em, sources.imu
-    choice, params = choose_parameters(args, em, sources.metadata.get("bench", {}))
+    choice, params = choose_parameters(args, em, sources.metadata)
     log_damage = warn_if_incomplete(args.input)
     # A --profile of another rig models that rig's mountings and gravity, as calibrate does.
     profile_mismatch = warn_if_recorded_elsewhere(args.input, args.profile, em.profile)
@@ -161,10 +160,11 @@ def missing_source(log: Path, what: str, source: str, sources: set[str], truncat
 
 
 def choose_parameters(args: argparse.Namespace, em: Dataset,
-                      bench: dict[str, str]) -> tuple[ModelChoice, ModelParameters | None]:
+                      metadata: dict[str, dict[str, str]]) -> tuple[ModelChoice, ModelParameters | None]:
     """The model (the live one unless --model, --effect or --params say otherwise) and the
     --params values on the log's profile (None without --params: calibrated later)."""
-    live = ModelDefaults(bench.get("model", "cosserat"), tuple(json.loads(bench.get("effects", "[]"))))
+    model_name, effects = logged_model(args.input, metadata)
+    live = ModelDefaults(model_name, effects, origin=f"{args.input}, metadata bench.model/effects")
     choice = model_choice(args, live)
     if args.params is None:
         return choice, None

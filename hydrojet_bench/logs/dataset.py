@@ -162,6 +162,21 @@ def rig_profile_of_log(path: Path, profile: RigProfile | str | Path | None,
     return profile_from_mapping(document, source=where)
 
 
+def logged_model(path: str | Path, metadata: dict[str, dict[str, str]]) -> tuple[str, tuple[str, ...]]:
+    """The model name and the effect specs the session ran (metadata ``bench.model`` and
+    ``bench.effects``, a JSON list; a log without them ran the plain Cosserat model)."""
+    bench = metadata.get("bench", {})
+    text = bench.get("effects", "[]")
+    where = f"{path}, metadata bench.effects"
+    try:
+        effects = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise UserError(f"{where}: not valid JSON ({error}): {text!r}") from None
+    if not isinstance(effects, list) or not all(isinstance(spec, str) for spec in effects):
+        raise UserError(f"{where}: {text!r} is not a JSON list of effect names")
+    return bench.get("model", "cosserat"), tuple(effects)
+
+
 def empty_note(path: str | Path) -> str:
     """" (an empty file: 0 bytes)" for a log of no bytes at all, which reads as a log cut
     before its first record (a session stopped before writing anything); else ""."""

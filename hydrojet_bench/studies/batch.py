@@ -83,14 +83,14 @@ def replay_log(task: LogTask) -> dict:
     from ..analysis.compare import compare_steps
     from ..bench.replay import live_difference_deg, read_session, replay
     from ..logs.condition import log_condition
-    from ..model_choice import ModelDefaults, choose_model
+    from ..model_choice import choose_model
 
     started = time.perf_counter()
     row = log_row(task, REPLAY_COLUMNS)
     try:
         session = read_session(Path(task.path), task.profile)
         # The live model and effects, as `replay` without options chooses them.
-        model = choose_model(None, (), None, ModelDefaults(session.model_name, session.effects)).model
+        model = choose_model(None, (), None, session.model_defaults()).model
         estimates = replay(session, model, None, None)
         kept = [i for i, estimate in enumerate(estimates) if estimate is not None]
         validation = [i for i in kept if session.steps.sweep[i] >= 0] or kept

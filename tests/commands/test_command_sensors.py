@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from mcap.writer import Writer
 from msgspec.structs import replace
 
 from hydrojet_bench.bench.session import Session, SessionRequest
@@ -55,6 +56,27 @@ def cut_after(log: Path, destination: Path, last_kept_ns: int) -> Path:
         indexes = make_reader(handle).get_summary().chunk_indexes
     chunk = next(index for index in indexes if index.message_start_time > last_kept_ns)
     destination.write_bytes(log.read_bytes()[:chunk.chunk_start_offset + chunk.chunk_length // 2])
+    return destination
+
+
+def with_bench_metadata(log: Path, destination: Path, **changes: str) -> Path:
+    """A copy of ``log`` whose ``bench`` metadata has ``changes`` (a hand-edited log)."""
+    with log.open("rb") as source, destination.open("wb") as copy:
+        reader, writer = make_reader(source), Writer(copy)
+        writer.start(profile=reader.get_header().profile, library="test")
+        for record in reader.iter_metadata():
+            writer.add_metadata(record.name, {**record.metadata, **(changes if record.name == "bench" else {})})
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in reader.iter_messages():
+            if schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(channel.topic, channel.message_encoding,
+                                                               schemas[schema.id], channel.metadata)
+            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time,
+                               message.sequence)
+        writer.finish()
     return destination
 
 
@@ -263,3 +285,19 @@ def test_a_cut_or_empty_log_says_what_it_lacks_and_that_it_was_cut(session_log, 
     em = sum(sample.source == "em" for sample in read_log(settling, topics=["/bench/sample"]).on(Sample))
     assert error(settling) == (f"{settling}: no /bench/sample samples from source 'em' in a finished step: all {em} "
                                "lie in the step the cut interrupted, which did not finish (the log is truncated)")
+
+
+@pytest.mark.parametrize(("changes", "said"), [
+    ({"effects": '["gravity",'}, "metadata bench.effects: not valid JSON"),
+    ({"effects": '{"gravity": 1}'}, "metadata bench.effects: '{\"gravity\": 1}' is not a JSON list of effect names"),
+    ({"effects": '["nonsense"]'}, "metadata bench.model/effects: unknown effect 'nonsense'"),
+    ({"model": "banana"}, "metadata bench.model/effects: unknown model 'banana'"),
+])
+def test_a_hand_edited_model_in_the_log_is_one_line_naming_the_log_and_its_field(session_log, tmp_path, capsys,
+                                                                                changes, said):
+    edited = with_bench_metadata(session_log, tmp_path / "edited.mcap", **changes)
+    for command in ("sensors", "replay"):
+        assert main([command, str(edited)]) == 2
+        error = capsys.readouterr().err.strip()
+        assert error == error.splitlines()[0] and error.startswith(f"error: {edited}, ")
+        assert said in error
