@@ -25,7 +25,7 @@ from ..model_choice import ModelChoice
 from ..profile import RigProfile
 
 
-def _warn(text: str) -> None:
+def warn(text: str) -> None:
     Console(stderr=True).print(f"warning: {text}", style="yellow", markup=False, highlight=False, soft_wrap=True)
 
 
@@ -36,7 +36,7 @@ def warn_if_incomplete(path: Path) -> dict[str, object] | None:
     condition = incomplete_log(path)
     if condition is None:
         return None
-    _warn(condition.notice())
+    warn(condition.notice())
     return condition.as_dict()
 
 
@@ -55,7 +55,7 @@ def warn_if_streams_fell_short(path: Path) -> list[str] | None:
                for rate in read_log(path, topics=[StreamRate.topic]).on(StreamRate) if rate.whole_session]
     short = [figure.describe() for figure in figures if figure.configured_hz > 0 and figure.below_warning]
     for line in short:
-        _warn(f"{path}: the session's {line}: samples were lost, and what rests on that stream has fewer than "
+        warn(f"{path}: the session's {line}: samples were lost, and what rests on that stream has fewer than "
               "its settings promise")
     return short or None
 
@@ -64,7 +64,7 @@ def warn_if_recorded_elsewhere(path: Path, profile_given: str | None, profile: R
     """Print `recorded_elsewhere`'s notice, if any, and return it for the JSON document."""
     notice = recorded_elsewhere(path, profile_given, profile)
     if notice is not None:
-        _warn(notice["message"])
+        warn(notice["message"])
     return notice
 
 
@@ -81,7 +81,7 @@ def warn_if_unsettled(path: Path, steps: Dataset, log_damage: dict[str, object] 
     single = int((steps.samples == 1).sum())
     if not single:
         return None
-    _warn(f"{path}: {single} of {len(steps)} steps average a single sample (the jets changed at the next "
+    warn(f"{path}: {single} of {len(steps)} steps average a single sample (the jets changed at the next "
           "row), so they are no settled equilibria, and the quasistatic models take a rod still moving "
           "for model error: label the settled rows (sweep and step columns) or hold each command longer")
     return {"count": single, "steps": len(steps)}
@@ -100,7 +100,7 @@ def warn_if_unsettled_steps(path: Path, steps: Dataset,
     if not turning:
         return None
     window = f"the last {window_s:g} s" if window_s is not None else "the end of its hold"
-    _warn(f"{path}: in {turning} of {len(steps)} steps the tip was still turning (by more than "
+    warn(f"{path}: in {turning} of {len(steps)} steps the tip was still turning (by more than "
           f"{UNSETTLED_TREND_DEG:g} deg) over {window}, which each step's settled state is "
           "averaged over: they are no equilibria, and the quasistatic models read the motion as model error; "
           "hold each command longer (the paper holds 5 s)")
@@ -112,7 +112,7 @@ def warn_if_uncalibrated(choice: ModelChoice) -> tuple[str, ...]:
     effect it was not fitted for) and return it for the JSON document."""
     notes = choice.uncalibrated()
     for note in notes:
-        _warn(note)
+        warn(note)
     return notes
 
 
@@ -153,7 +153,7 @@ _NO_SWEEPS = "it has no sweeps (sweep >= 0), so the steps compared are the calib
 def _warn_training(why: str) -> str:
     """Print and return ``why``, followed by what it makes of the errors."""
     text = f"{why}, so these are training errors, not held-out ones"
-    _warn(text)
+    warn(text)
     return text
 
 

@@ -30,12 +30,13 @@ from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log, em_frame_numbers, emp
 from ..logs.topics import EmFrame, Sample
 from ..model_choice import ModelChoice, ModelDefaults, model_choice
 from ..params import ModelParameters
+from ..profile import RigProfile
 from . import render
 from .calibrate import UNTRUSTED, calibration_exit_code
 from .figure_options import add_format_argument
 from .common import SESSION_LOG, add_input_arguments, add_model_arguments
-from .log_notice import (warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere, warn_if_scored_on_own_fit,
-                         warn_if_streams_fell_short, warn_if_uncalibrated)
+from .log_notice import (warn, warn_if_fitted_on, warn_if_incomplete, warn_if_recorded_elsewhere,
+                         warn_if_scored_on_own_fit, warn_if_streams_fell_short, warn_if_uncalibrated)
 
 # The longest EM gap --max-gap may bridge, s. A slerp across a gap assumes the tip turned
 # steadily in between; a minute already spans twelve of the paper's 5 s steps and three
@@ -86,7 +87,10 @@ def run(args: argparse.Namespace) -> int:
         agreement = sensor_agreement(imu, em, args.max_gap, args.min_hold, args.settle, sources.em_frames)
     except ValueError as error:
         raise UserError(f"{args.input}: cannot align the IMU and EM samples: {error}") from None
+    heading = heading_unobservable(em.profile, agreement)
     print_agreement(console, agreement, args.input)
+    if heading is not None:
+        warn(heading)
     estimation = estimate(args, choice, params, em, imu, console)
     if estimation is not None:
         print_estimation(console, estimation)
@@ -94,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
         render.write_json(args.json, {
             "log": str(args.input), **agreement.as_dict(),
             "online_estimation": None if estimation is None else estimation.as_dict(),
-            "log_damage": log_damage, "profile_mismatch": profile_mismatch, "streams_below_rate": streams_short})
+            "log_damage": log_damage, "profile_mismatch": profile_mismatch, "streams_below_rate": streams_short,
+            "heading_unobservable": heading})
     if args.report:
         from ..analysis.sensor_plots import write_sensor_report
 
@@ -102,6 +107,20 @@ def run(args: argparse.Namespace) -> int:
             console.print(f"wrote {render.plain(path)}")
     # As calibrate and replay: figures of parameters whose fit is not to be trusted.
     return calibration_exit_code(None if estimation is None else estimation.calibration)
+
+
+def heading_unobservable(profile: RigProfile, agreement: SensorAgreement) -> str | None:
+    """Why the heading figures mean nothing when the IMUs were fused without their
+    magnetometers (None when they were not): gravity pins each filter's tilt only, so
+    the two filters start their headings each from its own convention and the tip's
+    heading relative to the base is that start plus the gyros' drift."""
+    if profile.config.imu.use_magnetometer:
+        return None
+    return (f"the IMUs were fused without magnetometers (imu.use_magnetometer = false in {profile.source}): nothing "
+            "fixes the tip's heading relative to the base's, which is where the two filters started it plus the "
+            f"gyros' drift, so the heading error ({agreement.axes.heading_mean_deg:+.2f} deg mean) and every angle "
+            "that includes it (all, held, moving, bias, the IMU-fed estimation) measure that, not accuracy; the tilt "
+            f"({agreement.axes.tilt_rms_deg:.2f} deg RMS) is the comparable figure")
 
 
 def check_options(args: argparse.Namespace) -> None:

@@ -319,6 +319,8 @@ class ImuTable(Table, kw_only=True):
     rate_hz: Annotated[float, msgspec.Meta(ge=4.4, le=1125.0)] = 40.0
     fusion: FusionName = DEFAULT_FUSION    # "imufusion" or "madgwick": the orientation filter (docs/imu-fusion.md)
     madgwick_gain: Positive = 0.041        # Madgwick filter beta, rad/s ("madgwick" only)
+    # false fuses gyro and accelerometer only: nothing then fixes the tip's heading relative to the
+    # base's, and `sensors` says its heading figures measure the filters' start and drift.
     use_magnetometer: bool = True
     gyro_bias_samples: Annotated[int, msgspec.Meta(ge=0)] = 100  # at rest, before the first command
     base: ImuChipTable = msgspec.field(default_factory=ImuChipTable)  # [imu.base]: the base chip's correction

@@ -131,6 +131,7 @@ def test_sensors_compares_imu_with_em_and_both_estimators(session_log, tmp_path,
     assert sum(per_axis["components"][axis]["rms_deg"] ** 2 for axis in "xyz") == \
         pytest.approx(overall["rms_deg"] ** 2, rel=1e-6)
     assert figures["profile_mismatch"] is None
+    assert figures["heading_unobservable"] is None  # fused with the magnetometers
     estimation = figures["online_estimation"]
     assert estimation["steps"] == 3 * 5
     assert estimation["held_out"] is True and estimation["training_notice"] is None  # the sweeps were not fitted
@@ -301,3 +302,19 @@ def test_a_hand_edited_model_in_the_log_is_one_line_naming_the_log_and_its_field
         error = capsys.readouterr().err.strip()
         assert error == error.splitlines()[0] and error.startswith(f"error: {edited}, ")
         assert said in error
+
+
+def test_imus_fused_without_magnetometers_say_their_heading_figures_measure_nothing(tmp_path, capsys):
+    profile = tmp_path / "no-magnetometer.toml"
+    profile.write_text('extends = "sim"\n[imu]\nuse_magnetometer = false\n')
+    plan = tmp_path / "holds.csv"
+    plan.write_text("q1,q2,q3,settle_s\n0,0,0,6\n0.08,0,0,6\n0,0.08,0,6\n")
+    log, out = tmp_path / "session.mcap", tmp_path / "sensors.json"
+    assert main(["run", "--profile", str(profile), "--plan", str(plan), "--log", str(log), "--skip-checks",
+                 "--no-calibration"]) == 0
+    capsys.readouterr()
+    assert main(["sensors", str(log), "--min-hold", "4", "--json", str(out)]) == 0
+    warning = " ".join(capsys.readouterr().err.split())
+    notice = json.loads(out.read_text())["heading_unobservable"]
+    assert notice is not None and " ".join(notice.split()) in warning
+    assert "imu.use_magnetometer = false" in notice and "the tilt" in notice
