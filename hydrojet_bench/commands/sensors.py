@@ -23,7 +23,7 @@ from ..analysis.sensors import (AXES, DEFAULT_MIN_HOLD_S, DEFAULT_SETTLE_S, FRAM
                                 compare_estimators, hold_label, imu_profile, sensor_agreement)
 from ..data.dataset import Dataset
 from ..errors import ConvergenceError, UserError
-from ..estimation.calibration import CalibrationResult, calibrate_dataset
+from ..estimation.calibration import CalibrationResult, TooFewPoses, calibrate_dataset
 from ..estimation.setup_warnings import calibration_warnings
 from ..logs import read_log
 from ..logs.dataset import SAMPLE_TOPIC, dataset_from_log, em_frame_numbers, empty_note, logged_model
@@ -91,13 +91,19 @@ def run(args: argparse.Namespace) -> int:
     print_agreement(console, agreement, args.input)
     if heading is not None:
         warn(heading)
-    estimation = estimate(args, choice, params, em, imu, console)
+    skipped = None
+    try:
+        estimation = estimate(args, choice, params, em, imu)
+    except EstimationSkipped as reason:
+        estimation, skipped = None, str(reason)
+        console.print(f"[yellow]{render.plain(skipped)}: online estimation skipped[/]")
     if estimation is not None:
         print_estimation(console, estimation)
     if args.json:
         render.write_json(args.json, {
             "log": str(args.input), **agreement.as_dict(),
             "online_estimation": None if estimation is None else estimation.as_dict(),
+            "online_estimation_skipped": skipped,
             "log_damage": log_damage, "profile_mismatch": profile_mismatch, "streams_below_rate": streams_short,
             "heading_unobservable": heading})
     if args.report:
@@ -218,11 +224,15 @@ def calibration_figures(result: CalibrationResult | None) -> dict | None:
             "convergence": result.convergence, "at_bound": list(result.at_bound)}
 
 
+class EstimationSkipped(Exception):
+    """Why there is no online estimation to show (the agreement tables still stand)."""
+
+
 def estimate(args: argparse.Namespace, choice: ModelChoice, params: ModelParameters | None, em: Dataset,
-             imu: Dataset, console: Console) -> Estimation | None:
-    """The online estimator fed by each source (None, with a note, when there is
-    nothing to calibrate on). ``params``: those of --params, else None to calibrate on
-    the EM calibration poses."""
+             imu: Dataset) -> Estimation:
+    """The online estimator fed by each source; `EstimationSkipped` when there is nothing
+    to calibrate on. ``params``: those of --params, else None to calibrate on the EM
+    calibration poses."""
     em_steps, imu_steps = em.quasistatic_steps(), imu.quasistatic_steps()
     model = choice.model
     calibration = None
@@ -232,11 +242,12 @@ def estimate(args: argparse.Namespace, choice: ModelChoice, params: ModelParamet
     else:
         poses = em_steps.calibration_rows().valid_rows()
         if len(poses) == 0:
-            console.print("[yellow]no EM calibration poses (sweep -1) in the log and no --params: "
-                          "online estimation skipped[/]")
-            return None
+            raise EstimationSkipped("no EM calibration poses (sweep -1) in the log and no --params")
         try:
             calibration = calibrate_dataset(model, poses, em.profile.model_parameters(), choice.calibration_names)
+        except TooFewPoses as error:
+            raise EstimationSkipped(f"no calibration to estimate with: {error} (give --params, or record more "
+                                    "calibration poses)") from None
         except (ValueError, ConvergenceError) as error:
             raise UserError(f"{args.input}: cannot calibrate {model.name} on the EM calibration poses: "
                             f"{error}") from None

@@ -160,6 +160,10 @@ def parameter_bounds(model: ShootingModel, name: str) -> tuple[float, float]:
     return parameter.lower, parameter.upper
 
 
+class TooFewPoses(ValueError):
+    """Fewer residuals than parameters: the fit is not even attempted."""
+
+
 def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: ModelParameters,
               names: Sequence[str] = DEFAULT_NAMES, *,
               position_weight_rad_per_m: float = DEFAULT_POSITION_WEIGHT_RAD_PER_M,
@@ -197,7 +201,8 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
         poses[index].tip_position_in_base_sensor_m is not None for index in fitted_indices)
     rows_per_pose = 6 if use_positions else 3
     if len(fitted_indices) * rows_per_pose <= len(names):
-        raise ValueError(f"{len(fitted_indices)} poses cannot determine {len(names)} parameters")
+        raise TooFewPoses(f"{len(fitted_indices)} pose{'' if len(fitted_indices) == 1 else 's'} cannot determine "
+                          f"{len(names)} parameters")
     bounds = np.array([parameter_bounds(model, name) for name in names]).T
     scales = np.array([parameter_scale(model, name) for name in names])
     start = np.array([get_parameter(initial, name, _default(model, name)) for name in names])

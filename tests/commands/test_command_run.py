@@ -283,7 +283,7 @@ def test_a_failed_session_calibration_is_said_and_is_no_clean_exit(tmp_path, cap
     assert main(["run", "--plan", str(plan), "--no-live", "--skip-checks", "--time-scale", "20",
                  "--log", str(log)]) == 3
     out, err = capsys.readouterr()
-    assert ("warning: the calibration on the calibration poses failed: 1 poses cannot determine 9 parameters; the "
+    assert ("warning: the calibration on the calibration poses failed: 1 pose cannot determine 9 parameters; the "
             "session predicted and estimated with its starting parameters") in " ".join(err.split())
     assert "RMS errors" in out  # Table II of the sweep steps all the same
     assert f"replay {log} --online" in out and "calibrate" not in out and "--params p.toml" not in out

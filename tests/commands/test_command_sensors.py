@@ -176,11 +176,25 @@ def test_a_log_without_calibration_poses_is_reported_not_a_traceback(tmp_path, c
     log = tmp_path / "hold.mcap"
     assert main(["run", "--plan", "hold:2", "--no-live", "--time-scale", "20", "--log", str(log)]) == 0
     capsys.readouterr()
-    assert main(["sensors", str(log)]) == 0
+    assert main(["sensors", str(log), "--json", str(tmp_path / "s.json")]) == 0
     assert "no EM calibration poses (sweep -1) in the log" in " ".join(capsys.readouterr().out.split())
+    assert json.loads((tmp_path / "s.json").read_text())["online_estimation_skipped"].startswith("no EM calibration")
     assert main(["calibrate", str(log), "-o", str(tmp_path / "p.toml")]) == 2
     assert capsys.readouterr().err == (f"error: {log}: no calibration poses (steps of sweep -1) to fit on; record "
                                        "some with `hydrojet-bench run --plan calibration`\n")
+
+
+def test_too_few_poses_to_calibrate_skip_the_estimation_with_a_note_after_the_agreement_tables(tmp_path, capsys):
+    log, out = tmp_path / "one-pose.mcap", tmp_path / "s.json"
+    assert main(["run", "--plan", "calibration:1", "--no-live", "--time-scale", "20", "--log", str(log)]) == 3
+    capsys.readouterr()
+    assert main(["sensors", str(log), "--min-hold", "2", "--json", str(out)]) == 0
+    console = " ".join(capsys.readouterr().out.split())
+    assert "Static accuracy" in console
+    assert "1 pose cannot determine 9 parameters (give --params, or record more calibration poses): online " \
+           "estimation skipped" in console
+    figures = json.loads(out.read_text())
+    assert figures["online_estimation"] is None and "1 pose cannot" in figures["online_estimation_skipped"]
 
 
 def test_a_missing_parameter_file_or_a_json_path_it_may_not_replace_is_refused_before_the_analysis(
