@@ -399,6 +399,10 @@ def print_next_steps(console: Console, diagnosis: Diagnosis, args: argparse.Name
             print_next(console, "see how far a calibration gets from the profile's values with", [
                 calibrate, command("compare", *data, "--params", "p.toml", "--report", "report")])
             return
+        if diagnosis.untried_library:
+            print_next(console, "try the rest of the library (--candidate narrowed the candidates) with",
+                       [command("diagnose", *data, *known)])
+            return
         print_next(console, "see where it fails with", [
             calibrate, command("compare", *data, "--params", "p.toml", "--online", "--report", "report"),
             "then write the missing physics as an effect file (see docs/examples/) and try it with "

@@ -58,7 +58,11 @@ class CheckedEffect:
                                 "does not have (see hydrojet_bench/effects/problem.py)") from None
             raise UserError(f"effect {self.origin}: apply failed: AttributeError: {error}") from None
         except (Exception, SystemExit) as error:
-            raise UserError(f"effect {self.origin}: apply failed: {type(error).__name__}: {error}") from None
+            # The loads it failed at: an effect file may fail only at some (a formula
+            # that breaks above some force), which the data's other rows do not show.
+            jets = ", ".join(f"{force:.4g}" for force in np.asarray(problem.jet_forces_n, dtype=float).ravel())
+            raise UserError(f"effect {self.origin}: apply failed at jet forces ({jets}) N with values "
+                            f"{dict(values)}: {type(error).__name__}: {error}") from None
         for item in fields(problem):
             value = getattr(problem, item.name)
             if isinstance(value, (float, np.ndarray)) and not np.all(np.isfinite(value)):

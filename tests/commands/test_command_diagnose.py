@@ -188,3 +188,29 @@ def test_a_fit_on_its_bound_is_said_in_the_table_and_an_effect_text_prints_as_wr
     printed = " ".join(capsys.readouterr().out.split())
     assert f"[{entry['notes'][0]}]" in printed
     assert "jet 3 weaker [/notes] [bold]as written[/bold]" in printed
+
+
+def test_candidates_that_leave_out_the_library_say_so_in_the_verdict(recorded, tmp_path, capsys):
+    """Jet 3 at 85 % with the jet gains left out of the candidates: a setup hypothesis
+    wins for want of the effect that is there, and the verdict says what was not tried."""
+    out = tmp_path / "narrow.json"
+    assert main(["diagnose", str(recorded), "--candidate", "tip_pull", "--json", str(out)]) == 0
+    document = json.loads(out.read_text())
+    assert "jet_gain" in document["untried_library_effects"]
+    assert "tip_pull" not in document["untried_library_effects"]
+    assert "Only the candidates given were tried" in document["explanation"]
+    capsys.readouterr()
+
+
+def test_an_unexplained_verdict_from_narrowed_candidates_sends_to_the_rest_of_the_library(tmp_path, capsys):
+    """A sheared rod (shear_extension hidden at 3) tried against base_hysteresis alone."""
+    data = tmp_path / "sheared.csv"
+    assert main(["simulate", "-o", str(data), "--hidden", "shear_extension=3"]) == 0
+    capsys.readouterr()
+    assert main(["diagnose", str(data), "--candidate", "base_hysteresis"]) == 0
+    printed = " ".join(capsys.readouterr().out.split())
+    assert "verdict: unexplained" in printed
+    assert "none of the effects tried removes half of the excess" in printed
+    assert "not among the candidates (gravity, jet_gain" in printed and "outside the library" not in printed
+    assert f"Next: try the rest of the library (--candidate narrowed the candidates) with hydrojet-bench diagnose " \
+           f"{data} --model cosserat" in printed
