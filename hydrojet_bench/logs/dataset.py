@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import tomllib
+from collections import defaultdict, deque
 from pathlib import Path
 
 import numpy as np
@@ -85,12 +86,22 @@ def em_frame_numbers(contents: LogContents, time_s: np.ndarray) -> np.ndarray | 
     of a `dataset_from_log` of ``contents``' log): the ``/em/frame`` record the bench wrote
     at the same time (it stamps a frame and its sample alike). None when the log does not
     say for every sample (read without /em/frame, written by an earlier version, or the
-    frame's chunk damaged away) or two frames share a stamp."""
-    frames: dict[float, int | None] = {}
+    frame's chunk damaged away).
+
+    Frames may share a stamp: a simulated rig's session time stands still while a busy
+    host catches up (`bench.clock.PacedClock`), and the frames it then reads all get that
+    time. The bench writes each frame's record and its sample in the order it reads them,
+    so the samples of one stamp take that stamp's frame numbers in order."""
+    frames: dict[float, deque[int]] = defaultdict(deque)
     for frame in contents.on(EmFrame):
-        frames[frame.t_s] = None if frame.t_s in frames else frame.frame_number
-    numbers = [frames.get(t_s) for t_s in np.asarray(time_s, dtype=float).tolist()]
-    if not numbers or None in numbers:
+        frames[frame.t_s].append(frame.frame_number)
+    numbers = []
+    for t_s in np.asarray(time_s, dtype=float).tolist():
+        same_stamp = frames.get(t_s)
+        if not same_stamp:
+            return None
+        numbers.append(same_stamp.popleft())
+    if not numbers:
         return None
     return np.array(numbers, dtype=np.int64)
 

@@ -199,3 +199,22 @@ def test_a_log_keeps_the_profile_its_session_used_whatever_its_parent_becomes(tm
     monkeypatch.chdir(tmp_path.parent)
     recorded = dataset_from_log(log).profile
     assert (recorded.name, recorded.config.rod.length_m, recorded.config.capsule.mass_kg) == ("child", 0.08, 0.003)
+
+
+def test_frames_that_share_a_stamp_give_their_samples_their_numbers_in_order(tmp_path: Path) -> None:
+    """A busy host catching up reads several frames in one instant of a simulated rig's
+    paced session time: each sample still gets its own frame's number."""
+    from hydrojet_bench.logs.dataset import em_frame_numbers
+
+    rows = recorded_rows()
+    stamps = [0.0, 0.025, 0.025, 0.025, 0.1, 0.125]  # frames 1-3 read in one held instant
+    numbers = [10, 11, 12, 13, 14, 16]
+    path = tmp_path / "held.mcap"
+    with LogWriter(path, metadata=SIM_METADATA) as log:
+        for i, (t_s, number) in enumerate(zip(stamps, numbers)):
+            log.write(msgspec.structs.replace(EXAMPLES["/em/frame"], t_s=t_s, frame_number=number))
+            log.write(sample(rows, i, t_s=t_s))
+    contents = read_log(path, topics=["/em/frame"])
+    np.testing.assert_array_equal(em_frame_numbers(contents, np.array(stamps)), numbers)
+    # A sample without its frame's record: the log cannot say, and the caller falls back.
+    assert em_frame_numbers(contents, np.array([*stamps, 0.15])) is None
