@@ -148,9 +148,12 @@ def rig_profile_of_log(path: Path, profile: RigProfile | str | Path | None,
     if resolved:
         where = f"{path}, metadata bench.profile_resolved_json"
         try:
-            return profile_from_mapping(json.loads(resolved), source=where)
+            document = json.loads(resolved)
         except json.JSONDecodeError as error:
             raise UserError(f"{where}: not valid JSON: {error}") from None
+        if not isinstance(document, dict):
+            raise UserError(f"{where}: not a JSON object of profile tables (it is a {type(document).__name__})")
+        return profile_from_mapping(document, source=where)
     # Logs written before the resolved profile was embedded: the file's own text.
     text = bench.get("profile_toml")
     if not text and not metadata and not empty_note(path):

@@ -307,6 +307,7 @@ def test_a_cut_or_empty_log_says_what_it_lacks_and_that_it_was_cut(session_log, 
     ({"effects": '{"gravity": 1}'}, "metadata bench.effects: '{\"gravity\": 1}' is not a JSON list of effect names"),
     ({"effects": '["nonsense"]'}, "metadata bench.model/effects: unknown effect 'nonsense'"),
     ({"model": "banana"}, "metadata bench.model/effects: unknown model 'banana'"),
+    ({"profile_resolved_json": '["sim"]'}, "metadata bench.profile_resolved_json: not a JSON object of profile tables"),
 ])
 def test_a_hand_edited_model_in_the_log_is_one_line_naming_the_log_and_its_field(session_log, tmp_path, capsys,
                                                                                 changes, said):
