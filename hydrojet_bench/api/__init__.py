@@ -28,7 +28,8 @@ from pathlib import Path
 from ..analysis.compare import compare_methods, compare_steps, lead_in, validation_rows
 from ..analysis.diagnosis import DiagnosisSettings, diagnose as run_diagnosis
 from ..analysis.diagnosis.noise import repeatability_floor
-from ..bench.replay import live_difference_deg, logged_steps, read_session, replay as replay_session
+from ..bench.replay import (live_difference_deg, live_steps_compared, logged_steps, read_session,
+                           replay as replay_session)
 from ..effects import load_effects
 from ..errors import ConvergenceError, UserError
 from ..estimation.calibration import (DEFAULT_POSITION_WEIGHT_RAD_PER_M, FIT_ON, calibrate_dataset,
@@ -172,9 +173,10 @@ def replay(log: str | Path, *, model: str | None = None, effects: Sequence[str] 
     steps = session.steps.select(validation)
     results = compare_steps([estimates[i] for i in validation], steps)
     difference = live_difference_deg(session, estimates) if live_settings else None
+    compared = live_steps_compared(session, estimates) if live_settings else None
     return ReplayResult(choice.model, steps, results, live_settings, difference, calibration,
                         len(session.steps.calibration_rows()), len(estimates) - len(kept), _log_damage(Path(log)),
-                        choice.uncalibrated())
+                        choice.uncalibrated(), compared, len(session.steps))
 
 
 def study(spec: str | Path | None = None, output: str | Path | None = None, *, workers: int = 2,

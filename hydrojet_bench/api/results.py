@@ -140,7 +140,9 @@ class ReplayResult:
     identical; None otherwise or without live predictions). calibration: the fit on the
     ``calibration_poses`` logged calibration poses when another model had no params.
     skipped: steps where the model did not converge, left out. uncalibrated: what of the
-    model ``params`` did not calibrate (`ModelChoice.uncalibrated`)."""
+    model ``params`` did not calibrate (`ModelChoice.uncalibrated`). live_steps_compared:
+    of the ``logged_steps``, those whose live predictions the log holds (with the live
+    settings; a cut log may hold the steps but not all their predictions)."""
 
     model: ShootingModel
     steps: Dataset
@@ -152,6 +154,8 @@ class ReplayResult:
     skipped: int = 0
     log_damage: dict | None = None
     uncalibrated: tuple[str, ...] = ()
+    live_steps_compared: int | None = None
+    logged_steps: int = 0
 
     def table_ii(self) -> pd.DataFrame:
         return _table_ii(self.results)
@@ -168,7 +172,8 @@ class ReplayResult:
             "at_bound": list(self.calibration.at_bound)}
         return {"model": self.model.name, "effects": [effect.name for effect in self.model.effects], **document,
                 "steps": len(self.steps), "skipped_steps": self.skipped, "live_settings": self.live_settings,
-                "live_difference_deg": self.live_difference_deg, "calibration": calibration,
+                "live_difference_deg": self.live_difference_deg, "live_steps_compared": self.live_steps_compared,
+                "logged_steps": self.logged_steps, "calibration": calibration,
                 "uncalibrated": list(self.uncalibrated), "log_damage": self.log_damage}
 
     def to_pandas(self) -> pd.DataFrame:

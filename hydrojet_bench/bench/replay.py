@@ -152,15 +152,25 @@ def _record_at(session: LoggedSession, t_s: float) -> ParameterRecord:
     return earlier[-1]
 
 
-def live_difference_deg(session: LoggedSession, estimates: list[StepPrediction | None]) -> float | None:
-    """Largest |replayed - live| orientation error over every step and method, deg (None
-    if the log holds no live predictions to compare with)."""
-    differences = []
+def _live_differences(session: LoggedSession, estimates: list[StepPrediction | None]):
+    """(plan index, |replayed - live| orientation error, deg) of every step and method the
+    log holds a live prediction of."""
     for index, estimate in zip(session.plan_index, estimates):
         if estimate is None:
             continue
         for prediction in (estimate.ref, estimate.online):
             if prediction is not None and (int(index), prediction.method) in session.live_errors:
-                differences.append(abs(prediction.orientation_error_deg
-                                       - session.live_errors[int(index), prediction.method]))
-    return max(differences) if differences else None
+                yield int(index), abs(prediction.orientation_error_deg - session.live_errors[int(index),
+                                                                                             prediction.method])
+
+
+def live_difference_deg(session: LoggedSession, estimates: list[StepPrediction | None]) -> float | None:
+    """Largest |replayed - live| orientation error over every step and method, deg (None
+    if the log holds no live predictions to compare with)."""
+    return max((difference for _, difference in _live_differences(session, estimates)), default=None)
+
+
+def live_steps_compared(session: LoggedSession, estimates: list[StepPrediction | None]) -> int:
+    """How many steps `live_difference_deg` compared: a log cut before the live
+    predictions of its last steps were written holds the steps but not their predictions."""
+    return len({index for index, _ in _live_differences(session, estimates)})

@@ -70,8 +70,11 @@ def run(args: argparse.Namespace) -> int:
         if result.live_difference_deg is None:
             console.print("the log holds no live predictions to compare with")
         else:
+            missing = result.logged_steps - result.live_steps_compared
+            over = (f" over {result.live_steps_compared} of {result.logged_steps} steps (the log holds no live "
+                    f"prediction of the other {missing})" if missing else "")
             console.print(f"largest difference from the live estimates: {result.live_difference_deg:.3g} deg "
-                          f"({'identical' if result.live_difference_deg == 0 else 'differs'})")
+                          f"({'identical' if result.live_difference_deg == 0 else 'differs'}){over}")
     if args.report:
         from ..analysis.report import write_report
 

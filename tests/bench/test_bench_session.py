@@ -16,7 +16,7 @@ import pytest
 from msgspec.structs import replace
 
 from hydrojet_bench import api
-from hydrojet_bench.bench.replay import live_difference_deg, read_session, replay
+from hydrojet_bench.bench.replay import live_difference_deg, live_steps_compared, read_session, replay
 from drivers.imu import output_rate_hz
 from drivers.transport.sim import unregister_device
 from hydrojet_bench.bench.clock import ScaledClock
@@ -129,8 +129,16 @@ def test_replay_with_the_live_settings_reproduces_the_live_estimates_exactly(fin
     model, _ = build_model("cosserat", [])
     estimates = replay(logged, model, logged.profile.online_settings())
     assert live_difference_deg(logged, estimates) == 0.0
+    assert live_steps_compared(logged, estimates) == len(logged.steps)
+    # A log cut before the live predictions of its last steps were written: what was
+    # compared is said, not only that it was identical.
+    first_steps = {key: error for key, error in logged.live_errors.items() if key[0] < logged.plan_index[3]}
+    cut = dataclasses.replace(logged, live_errors=first_steps)
+    assert live_difference_deg(cut, estimates) == 0.0 and live_steps_compared(cut, estimates) == 3
     # The command's path (the API) takes the settings from the log's profile.
-    assert api.replay(session.request.log_path, online=True).live_difference_deg == 0.0
+    replayed_log = api.replay(session.request.log_path, online=True)
+    assert replayed_log.live_difference_deg == 0.0
+    assert replayed_log.live_steps_compared == replayed_log.logged_steps == len(logged.steps)
     for live, replayed in zip(result.estimates, estimates):
         np.testing.assert_array_equal(live.online.tip_orientation_in_base, replayed.online.tip_orientation_in_base)
         np.testing.assert_array_equal(live.online.disturbance_moment_nm, replayed.online.disturbance_moment_nm)
