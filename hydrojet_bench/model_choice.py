@@ -12,6 +12,7 @@ import argparse
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .effects import LIBRARY, Effect, command_line_spec, load_effect, load_effects, qualified_parameter_names
 from .errors import UserError
@@ -19,7 +20,11 @@ from .estimation.calibration import DEFAULT_NAMES
 from .models import make_model
 from .models.shooting import ShootingModel
 from .params import ModelParameters
-from .params_io import ParameterFile, check_values_for, read_parameter_file, resolve_effect_spec
+from .params_io import (ParameterFile, calibrated_on_another_rig, check_values_for, read_parameter_file,
+                        resolve_effect_spec)
+
+if TYPE_CHECKING:
+    from .profile import RigProfile
 
 
 @dataclass(frozen=True)
@@ -61,16 +66,20 @@ class ModelChoice:
         check_values_for(self.model.effects, self.parameter_file.parameters, f"{self.parameter_path}: parameters.")
         return self.parameter_file.apply(nominal, self.parameter_path)
 
-    def uncalibrated(self) -> tuple[str, ...]:
+    def uncalibrated(self, profile: RigProfile | None = None) -> tuple[str, ...]:
         """What runs without the parameter file having calibrated it, one sentence each: a
         ``--model`` other than the file's, an effect (added by ``--effect``, or listed by a
         hand-edited file) whose values the file lacks, so that they stay at their no-effect
-        defaults. Gravity is exempt: every model has it at its nominal weight unless a
-        calibration fitted it. Empty without a parameter file."""
+        defaults, and ``profile``'s rig when the file was calibrated on another
+        (`calibrated_on_another_rig`). Gravity is exempt: every model has it at its nominal
+        weight unless a calibration fitted it. Empty without a parameter file."""
         if self.parameter_file is None:
             return ()
         path, file = self.parameter_path, self.parameter_file
         notes = []
+        elsewhere = None if profile is None else calibrated_on_another_rig(file, path, profile)
+        if elsewhere is not None:
+            notes.append(elsewhere)
         if self.model.name != file.model:
             notes.append(f"{path} was calibrated for the {file.model} model; the {self.model.name} model runs "
                          f"with its values, uncalibrated (calibrate with --model {self.model.name})")

@@ -220,6 +220,8 @@ _CORE_PARAMETERS: dict[str, tuple[str, str, int | None]] = {
     "wd_mz": ("disturbance", "moment_nm", 2),
 }
 PARAMETER_NAMES: tuple[str, ...] = tuple(_CORE_PARAMETERS)
+# "section.field" of what those set: a parameter file's values replace a profile's there.
+FITTED_FIELDS = frozenset(f"{section}.{name}" for section, name, _ in _CORE_PARAMETERS.values())
 
 # Plausible values (low, high, unit) of the flat-named parameters when they come from a
 # file: outside them is a unit slip (MPa written for Pa, mm for m) or a typo, not a soft

@@ -30,7 +30,8 @@ from .effects.user import CheckedEffect
 from .config.schema import Finite
 from .errors import UserError
 from .files import check_replaceable
-from .params import PARAMETER_NAMES, PLAUSIBLE_RANGES, ModelParameters, check_plausible, with_parameters
+from .params import (FITTED_FIELDS, PARAMETER_NAMES, PLAUSIBLE_RANGES, ModelParameters, check_plausible,
+                     with_parameters)
 
 if TYPE_CHECKING:
     from .data.dataset import Dataset
@@ -178,10 +179,40 @@ def calibration_parameter_file(model: str, effects: Sequence[str], fit: Calibrat
         parameters=dict(zip(fit.names, map(float, fit.values))),
         standard_errors={name: error for name, error in errors.items() if name not in undetermined},
         calibration={**({"undetermined": undetermined} if undetermined else {}),
-                     "data": str(data), "profile": profile.source, "fit_on": fit_on,
+                     "data": str(data), "profile": profile.source, "profile_name": profile.name, "fit_on": fit_on,
                      "poses": int(np.sum(rows & (steps.sweep == -1))),
                      "sweep_steps": int(np.sum(rows & (steps.sweep >= 0))),
                      "rms_orientation_deg_before": round(fit.rms_orientation_deg_before, 4),
                      "rms_orientation_deg_after": round(fit.rms_orientation_deg_after, 4),
                      "converged": fit.converged, "convergence": fit.convergence,
-                     **({"at_bound": list(fit.at_bound)} if fit.at_bound else {})})
+                     **({"at_bound": list(fit.at_bound)} if fit.at_bound else {}),
+                     # The rig the values belong to, to tell when they are used on another.
+                     **{f"{RIG_KEY_PREFIX}{key}": value for key, value in profile.physics().items()}})
+
+
+# [calibration] keys of the rig's physics tables (`RigProfile.physics`), e.g. "rig.rod.radius_m".
+RIG_KEY_PREFIX = "rig."
+
+
+def calibrated_on_another_rig(parameter_file: ParameterFile, path: Path | str, profile: RigProfile) -> str | None:
+    """Why ``parameter_file`` (at ``path``) does not belong to ``profile``'s rig: the
+    physics tables it recorded where it was calibrated that differ from ``profile``'s,
+    leaving out what its values replace (E0, EL, L). None when they agree or the file
+    predates the record."""
+    recorded = {key.removeprefix(RIG_KEY_PREFIX): value for key, value in parameter_file.calibration.items()
+                if key.startswith(RIG_KEY_PREFIX)}
+    if not recorded:
+        return None
+    here = profile.physics()
+    differing = [key for key in sorted(recorded.keys() | here.keys())
+                 if key not in FITTED_FIELDS and not np.array_equal(np.asarray(recorded.get(key), dtype=object),
+                                                                  np.asarray(here.get(key), dtype=object))]
+    if not differing:
+        return None
+    shown = "; ".join(f"{key} {_format(recorded[key]) if key in recorded else 'unset'} there, "
+                      f"{_format(here[key]) if key in here else 'unset'} here" for key in differing[:3])
+    more = f" (and {len(differing) - 3} more)" if len(differing) > 3 else ""
+    where = parameter_file.calibration.get("profile_name", "another profile")
+    return (f"{path} was calibrated on the rig of profile {where!r}, not of profile {profile.name!r} used here: "
+            f"{shown}{more}; its "
+            "values belong to that rig (calibrate on this one, or give its profile with --profile)")

@@ -128,6 +128,10 @@ class SensorPoses(NamedTuple):
     tip_position_m: np.ndarray
 
 
+# The profile tables the models and the sensor frames are made of (not the devices', the
+# session's or the twin's).
+PHYSICS_TABLES = ("gravity", "base", "base_sensor", "tip_sensor", "rod", "capsule", "jets")
+
 @dataclass(frozen=True)
 class RigProfile:
     """One rig: its typed configuration and the physics it implies.
@@ -193,6 +197,17 @@ class RigProfile:
         """The online estimator's settings (`[estimator]`): what the rig's live sessions
         used, so every offline estimate of its data uses them too."""
         return self.config.estimator.online_settings()
+
+    def physics(self) -> dict[str, float | bool | list]:
+        """The tables the models read (`PHYSICS_TABLES`), flattened to "table.key" values
+        as TOML writes them (tuples as lists; unset values left out): what a parameter
+        file records of the rig it was calibrated on, to tell another rig's values."""
+        flat: dict[str, float | bool | list] = {}
+        for table in PHYSICS_TABLES:
+            for key, value in msgspec.to_builtins(getattr(self.config, table)).items():
+                if value is not None:
+                    flat[f"{table}.{key}"] = list(value) if isinstance(value, tuple) else value
+        return flat
 
     @property
     def source(self) -> str:

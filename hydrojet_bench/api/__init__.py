@@ -176,7 +176,7 @@ def replay(log: str | Path, *, model: str | None = None, effects: Sequence[str] 
     compared = live_steps_compared(session, estimates) if live_settings else None
     return ReplayResult(choice.model, steps, results, live_settings, difference, calibration,
                         len(session.steps.calibration_rows()), len(estimates) - len(kept), _log_damage(Path(log)),
-                        choice.uncalibrated(), compared, len(session.steps))
+                        choice.uncalibrated(session.profile), compared, len(session.steps))
 
 
 def study(spec: str | Path | None = None, output: str | Path | None = None, *, workers: int = 2,

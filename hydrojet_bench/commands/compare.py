@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         return Evaluation(choice.parameter_path, choice.model, results,
                           {key: break_down(c, validation) for key, c in results.items()},
                           jet_force_scales(choice.model, params, validation), as_diagnosed,
-                          warn_if_uncalibrated(choice), warn_if_fitted_on(choice, args.input, validation))
+                          warn_if_uncalibrated(choice, profile), warn_if_fitted_on(choice, args.input, validation))
 
     after = evaluate(after_choice)
     before = None if before_choice is None else evaluate(before_choice)

@@ -107,10 +107,10 @@ def warn_if_unsettled_steps(path: Path, steps: Dataset,
     return {"count": turning, "steps": len(steps), "window_s": window_s, "trend_deg": UNSETTLED_TREND_DEG}
 
 
-def warn_if_uncalibrated(choice: ModelChoice) -> tuple[str, ...]:
+def warn_if_uncalibrated(choice: ModelChoice, profile: RigProfile) -> tuple[str, ...]:
     """Print what of ``choice``'s model its parameter file did not calibrate (a model or an
-    effect it was not fitted for) and return it for the JSON document."""
-    notes = choice.uncalibrated()
+    effect it was not fitted for, or ``profile``'s rig) and return it for the JSON document."""
+    notes = choice.uncalibrated(profile)
     for note in notes:
         warn(note)
     return notes
@@ -147,7 +147,7 @@ def warn_if_scored_on_own_fit(path: Path, validation: Dataset) -> str | None:
     return _warn_training(f"the model was calibrated here on the calibration poses of {path}: {_NO_SWEEPS}")
 
 
-_NO_SWEEPS = "it has no sweeps (sweep >= 0), so the steps compared are the calibration poses fitted"
+_NO_SWEEPS = "it has no sweeps (sweep >= 0): the steps compared are the calibration poses fitted"
 
 
 def _warn_training(why: str) -> str:

@@ -136,7 +136,7 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
                              calibrate=not args.no_calibration, calibration_names=choice.calibration_names,
                              seed=args.seed, warnings=plan_warnings
                              # The session's own calibration fits what the file did not.
-                             + (choice.uncalibrated() if args.no_calibration else ()),
+                             + (choice.uncalibrated(profile) if args.no_calibration else ()),
                              command_line=shlex.join(["hydrojet-bench", *sys.argv[1:]]), overwrite_log=overwrite,
                              setup_checks=not args.skip_checks)
     console = render.console_for(args)

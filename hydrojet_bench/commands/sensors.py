@@ -238,7 +238,7 @@ def estimate(args: argparse.Namespace, choice: ModelChoice, params: ModelParamet
     calibration = None
     if params is not None:
         origin = f"parameters from {args.params}"
-        warn_if_uncalibrated(choice)
+        warn_if_uncalibrated(choice, em.profile)
     else:
         poses = em_steps.calibration_rows().valid_rows()
         if len(poses) == 0:

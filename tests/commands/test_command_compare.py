@@ -146,6 +146,20 @@ def test_what_the_parameters_did_not_calibrate_is_said(calibrated, capsys, tmp_p
     parameters, warnings = compare("--params", str(before))
     assert parameters["uncalibrated"] == [] and parameters["held_out"] is True and "warning" not in warnings
 
+    # Calibrated on the rig of another profile (a thicker rod): its values are that rig's.
+    thick = tmp_path / "thick.toml"
+    thick.write_text('extends = "sim"\n[rod]\nradius_m = 0.005\n')
+    elsewhere = tmp_path / "thick-rod.toml"
+    assert main(["calibrate", str(data), "--profile", str(thick), "-o", str(elsewhere)]) in (0, 3)
+    capsys.readouterr()
+    parameters, warnings = compare("--params", str(elsewhere))
+    note = (f"{elsewhere} was calibrated on the rig of profile 'thick', not of profile 'sim' used here: "
+            "rod.radius_m 0.005 there, 0.0045 here; its values belong to that rig")
+    assert len(parameters["uncalibrated"]) == 1 and parameters["uncalibrated"][0].startswith(note)
+    assert note in " ".join(warnings.split())
+    parameters, warnings = compare("--params", str(elsewhere), "--profile", str(thick))
+    assert parameters["uncalibrated"] == []
+
     parameters, warnings = compare("--params", str(before), "--effect", "jet_gain", "--model", "prb")
     assert len(parameters["uncalibrated"]) == 2
     assert f"{before} was calibrated for the cosserat model; the prb model runs with its values" in warnings

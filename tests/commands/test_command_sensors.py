@@ -231,8 +231,8 @@ def test_scoring_the_poses_fitted_says_the_errors_are_training_errors(session_lo
     assert main(["sensors", str(poses_log), "--min-hold", "2", "--settle", "0.5", "--json", str(out)]) in (0, 3)
     captured = capsys.readouterr()
     warnings, console = " ".join(captured.err.split()), " ".join(captured.out.split())
-    assert (f"the model was calibrated here on the calibration poses of {poses_log}: it has no sweeps (sweep >= 0), "
-            "so the steps compared are the calibration poses fitted, so these are training errors, not held-out "
+    assert (f"the model was calibrated here on the calibration poses of {poses_log}: it has no sweeps (sweep >= 0): "
+            "the steps compared are the calibration poses fitted, so these are training errors, not held-out "
             "ones") in warnings
     assert f"({POSES} settled steps, the calibration poses fitted: training errors, not held-out ones)" in console
     estimation = json.loads(out.read_text())["online_estimation"]
