@@ -121,3 +121,18 @@ def test_a_study_result_tables_and_plots_its_confusion(tmp_path):
     figure = result.plot()
     assert figure.axes[0].get_xlabel() == "verdict" and figure.axes[0].get_ylabel() == "hidden truth"
     assert result.to_pandas() is not rows and result.to_pandas().equals(rows)
+
+
+def test_the_diagnosis_table_says_what_the_command_table_says_of_each_fit(mystery):
+    """Whether each fit converged, why, and what sits on a bound: an unconverged fit
+    ranks last, and the table says why, as `diagnose` prints it."""
+    result = hj.diagnose(mystery, workers=1)
+    table = result.to_pandas()
+    ranking = result.diagnosis.ranking
+    assert list(table["effect"]) == [c.effect for c in ranking]
+    assert list(table["converged"]) == [c.converged for c in ranking]
+    assert list(table["convergence"]) == [c.convergence for c in ranking]
+    assert list(table["at_bound"]) == [", ".join(c.at_bound) for c in ranking]
+    winner = table.iloc[0]
+    assert winner["effect"] == "pressure_stiffening" and winner["converged"]
+    assert set(winner["parameters"]) == set(ranking[0].parameters)

@@ -204,13 +204,18 @@ class DiagnoseResult:
     def to_pandas(self) -> pd.DataFrame:
         """One row per candidate, best score first: held-out orientation RMSE (deg), the
         share of the excess error explained, the score change (BIC), whether it
-        qualifies, the cosine with the online estimate, and why a fit failed."""
+        qualifies, the cosine with the online estimate, whether its fit converged (and
+        why), the fitted values on a bound (comma-separated), the fitted parameters
+        (name -> (value, standard error)) and why a fit failed: what the command's table
+        says, so that an unconverged fit ranked last says why here too."""
+        columns = ["effect", "heldout_orientation_rmse_deg", "explained_fraction", "score_change", "qualifies",
+                   "online_correlation", "converged", "convergence", "at_bound", "parameters", "error"]
         return pd.DataFrame([{
             "effect": c.effect, "heldout_orientation_rmse_deg": c.heldout_orientation_rmse_deg,
             "explained_fraction": c.explained_fraction, "score_change": c.score_change, "qualifies": c.qualifies,
-            "online_correlation": c.online_correlation, "error": c.error} for c in self.diagnosis.ranking],
-            columns=["effect", "heldout_orientation_rmse_deg", "explained_fraction", "score_change", "qualifies",
-                     "online_correlation", "error"])
+            "online_correlation": c.online_correlation, "converged": c.converged, "convergence": c.convergence,
+            "at_bound": ", ".join(c.at_bound), "parameters": dict(c.parameters), "error": c.error}
+            for c in self.diagnosis.ranking], columns=columns)
 
     def plot(self) -> Figure:
         return figures.ranking_figure(self.to_pandas(), self.diagnosis.baseline_heldout_rmse_deg,
