@@ -99,16 +99,22 @@ def test_per_step_tables_hold_commands_poses_and_errors(mystery, tmp_path):
     (lambda data, tmp: hj.load(tmp / "missing.csv"), "missing.csv"),
     (lambda data, tmp: hj.load(tmp / "data.txt"), "unknown data format"),
     (lambda data, tmp: hj.calibrate(data, effects=["warp_drive"]), "unknown effect 'warp_drive'"),
-    (lambda data, tmp: hj.calibrate(data, position_weight_rad_per_m=-1.0), "position_weight_rad_per_m must be >= 0"),
+    (lambda data, tmp: hj.calibrate(data, position_weight_rad_per_m=-1.0),
+     "position_weight_rad_per_m must be a finite number >= 0, got -1.0"),
+    (lambda data, tmp: hj.calibrate(data, position_weight_rad_per_m="1"), "position_weight_rad_per_m must be"),
+    (lambda data, tmp: hj.calibrate(data, position_weight_rad_per_m=float("inf")), "position_weight_rad_per_m"),
     (lambda data, tmp: hj.compare(data, tmp / "none.toml"), "no such parameter file"),
     (lambda data, tmp: hj.diagnose(data, workers=0), "workers must be at least 1"),
+    (lambda data, tmp: hj.diagnose(data, workers="2"), "workers must be a whole number of processes, got '2'"),
+    (lambda data, tmp: hj.study(tmp / "none.toml", tmp / "out", workers=1.5), "workers must be a whole number"),
     (lambda data, tmp: hj.replay(tmp / "none.mcap"), "none.mcap"),
     (lambda data, tmp: hj.study(tmp / "none.toml"), "none.toml"),
 ])
 def test_mistakes_raise_user_error_naming_the_file_or_argument(mystery, tmp_path, call, message):
     (tmp_path / "data.txt").write_text("t,q1\n")
-    with pytest.raises(UserError, match=message.replace(".", r"\.")):
+    with pytest.raises(UserError, match=message.replace(".", r"\.").replace("(", r"\(")):
         call(mystery, tmp_path)
+    assert not (tmp_path / "out").exists()  # refused before anything is written
 
 
 def test_a_study_result_tables_and_plots_its_confusion(tmp_path):

@@ -22,6 +22,8 @@ naming the file and field; nothing here prints (progress, when asked for, goes t
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -70,8 +72,7 @@ def calibrate(data: Data, *, model: str | None = None, effects: Sequence[str] = 
     effect is identified only by sweeps, `Effect.identified_by`). ``params`` only
     chooses the model and effects here; the fit starts from the profile's values.
     `CalibrateResult.save(path)` writes the parameter file."""
-    if not position_weight_rad_per_m >= 0:
-        raise UserError(f"position_weight_rad_per_m must be >= 0, got {position_weight_rad_per_m}")
+    _check_number(position_weight_rad_per_m, "position_weight_rad_per_m", minimum=0.0)
     if fit_on is not None and fit_on not in FIT_ON:
         raise UserError(f"fit_on must be one of {', '.join(FIT_ON)}, got {fit_on!r}")
     measurements = _measurements(data, profile)
@@ -127,8 +128,8 @@ def diagnose(data: Data, *, model: str | None = None, effects: Sequence[str] = (
     baseline (``model`` with the known ``effects``) and the baseline plus each of
     ``candidates`` (default: every library effect not known) calibrated on part of the
     steps and scored on the held-out repetitions against the noise floor."""
-    if workers is not None and workers < 1:
-        raise UserError(f"workers must be at least 1, got {workers}")
+    if workers is not None:
+        workers = _checked_workers(workers)
     choice = _choice(model, effects, None)
     _check_specs(candidates, "candidates")
     load_effects([*choice.effect_specs, *candidates])  # one name, one effect: known and candidates alike
@@ -206,8 +207,7 @@ def study(spec: str | Path | None = None, output: str | Path | None = None, *, w
                            left_out=0 if members is None else len(store.stored() - members))
     if spec is None:
         raise UserError("study: give a SPEC.toml (or report_only with the result folder)")
-    if workers < 1:
-        raise UserError(f"workers must be at least 1, got {workers}")
+    workers = _checked_workers(workers)
     plan = load_study(Path(spec))
     cells = expand(plan)
     if not cells:
@@ -266,6 +266,23 @@ def _choice(model: str | None, effects: Sequence[str], params: Params, defaults:
     files = [*params.effect_specs, *(effects if effect_files is None else effect_files)]
     return choose_model(model, tuple(effects), _source(params), defaults, effect_files=files,
                         parameter_file=params.parameter_file)
+
+
+def _checked_workers(workers: object) -> int:
+    """A whole number of processes, at least one (2.0 is read as 2; 1.5 and "2" are refused
+    here rather than deep inside Dask or a comparison)."""
+    if isinstance(workers, bool) or not isinstance(workers, (int, float)) or not float(workers).is_integer():
+        raise UserError(f"workers must be a whole number of processes, got {workers!r}")
+    if workers < 1:
+        raise UserError(f"workers must be at least 1, got {workers}")
+    return int(workers)
+
+
+def _check_number(value: object, argument: str, *, minimum: float) -> None:
+    """A finite number >= ``minimum`` (an infinite weight makes every residual infinite)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or value < minimum:
+        raise UserError(f"{argument} must be a finite number >= {minimum:g}, got {value!r}")
 
 
 def _check_specs(specs: Sequence[str], argument: str) -> None:
