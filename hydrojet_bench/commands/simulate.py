@@ -40,6 +40,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     check_seed(args.seed)
+    if args.output.suffix.lower() != ".csv" and not args.output.is_dir():
+        # The analyses read a file by its suffix: x.mcap of CSV text is "not an MCAP file".
+        raise UserError(f"{args.output}: simulate writes a CSV table; name it with .csv (every command reads a "
+                        "file by its suffix)")
     make_folder_for(args.output)
     check_writable_target(args.output, "recording", overwrite=args.overwrite)  # before minutes of simulation
     profile = load_profile(args.profile)

@@ -109,6 +109,12 @@ def test_simulate_refuses_an_existing_file_or_a_directory_before_simulating(tmp_
     assert taken.read_text() == "precious\n"
     assert main(["simulate", "-o", str(tmp_path)]) == 2
     assert f"{tmp_path}: is a directory; give the recording a file name" in one_line(capsys)
+    # A CSV under a log's name would be read as a damaged log, and could replace one.
+    log = tmp_path / "session.mcap"
+    log.write_bytes(b"\x89MCAP0\r\n")
+    assert main(["simulate", "-o", str(log), "--overwrite"]) == 2
+    assert f"{log}: simulate writes a CSV table; name it with .csv" in one_line(capsys)
+    assert log.read_bytes() == b"\x89MCAP0\r\n"
 
 
 def test_simulate_creates_a_missing_folder(tmp_path: Path, monkeypatch) -> None:
