@@ -67,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--position-weight must be from 0 to {MAX_POSITION_WEIGHT_RAD_PER_M:g} rad per m (there, "
                         f"a millimetre outweighs ten radians), got {args.position_weight}")
     choice = model_choice(args)  # validates --effect before the data is read
-    # Before the fit: neither output may replace an input or other data.
+    # Before the fit: neither output may replace an input, other data or the other output.
+    render.check_distinct_outputs({"-o": args.output, "--json": args.json})
     check_parameter_output(args.output)
     render.check_json_output(args.json)
     model = choice.model

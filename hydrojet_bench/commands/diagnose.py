@@ -83,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
     if args.depth < 1:
         raise UserError(f"--depth must be at least 1, got {args.depth}")
+    render.check_distinct_outputs({"--json": args.json, "--export": args.export, "--export-profile": args.export_profile,
+                                   "--separating-plan": args.separating_plan})
     if args.separating_plan is not None:
         check_writable_target(args.separating_plan, "plan file", overwrite=False)
     choice = model_choice(args)  # validates --effect before the data is read

@@ -106,6 +106,19 @@ def json_row(row: dict) -> dict:
     return {key: None if isinstance(value, float) and math.isnan(value) else value for key, value in values.items()}
 
 
+def check_distinct_outputs(outputs: dict[str, Path | None]) -> None:
+    """Refuse two options (``--json``, ``-o`` ...) naming one file: the second write would
+    replace the first, after the work, or be refused then."""
+    seen: dict[Path, str] = {}
+    for option, path in outputs.items():
+        if path is None or _is_stdout(path):
+            continue
+        resolved = Path(path).resolve()
+        if resolved in seen:
+            raise UserError(f"{path}: named by both {seen[resolved]} and {option}; give each its own file")
+        seen[resolved] = option
+
+
 def check_json_output(path: Path | None) -> None:
     """Refuse (`check_replaceable`) to write a JSON document over anything but an earlier
     one; standard output and no path pass."""

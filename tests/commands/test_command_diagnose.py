@@ -63,6 +63,8 @@ def test_user_mistakes_give_one_clear_line_and_exit_code_2(recorded, tmp_path, c
         (["--depth", "0"], "--depth must be at least 1"),
         (["--separating-plan", str(recorded)], "already exists"),
         (["--separating-plan", str(tmp_path / "no" / "plan.toml")], "does not exist"),
+        (["--json", str(tmp_path / "same.json"), "--export", str(tmp_path / "same.json")],
+         f"{tmp_path / 'same.json'}: named by both --json and --export; give each its own file"),
     ):
         # main() turns a UserError into one line on stderr and exit code 2; anything else
         # would propagate and fail the test.

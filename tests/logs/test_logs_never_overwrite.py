@@ -168,3 +168,9 @@ def test_an_output_never_replaces_an_input_or_other_data(tmp_path: Path, capsys)
     assert main(["compare", str(table), "--params", str(params), "--json", str(params)]) == 2
     assert "p.toml: exists and is not a JSON document" in one_line(capsys)
     assert params.read_bytes() == written
+    # Both outputs on one new file: the fit ran and wrote the parameters, then the JSON
+    # was refused over them. Now refused before the fit.
+    both = tmp_path / "both.toml"
+    assert main(["calibrate", str(table), "-o", str(both), "--json", str(both)]) == 2
+    assert one_line(capsys) == f"error: {both}: named by both -o and --json; give each its own file"
+    assert not both.exists()
