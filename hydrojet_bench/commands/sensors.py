@@ -89,6 +89,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"{args.input}: cannot align the IMU and EM samples: {error}") from None
     heading = heading_unobservable(em.profile, agreement)
     print_agreement(console, agreement, args.input)
+    if sources.em_frames is None and args.max_gap is None:
+        warn(f"{args.input}: the log does not give every EM sample's tracker frame number (/em/frame records "
+             "missing or damaged), so EM gaps are judged on the host's stamps, whose jitter may drop IMU samples "
+             "next to frames that were not lost (see 'dropped')")
     if heading is not None:
         warn(heading)
     skipped = None

@@ -59,8 +59,9 @@ def cut_after(log: Path, destination: Path, last_kept_ns: int) -> Path:
     return destination
 
 
-def with_bench_metadata(log: Path, destination: Path, **changes: str) -> Path:
-    """A copy of ``log`` whose ``bench`` metadata has ``changes`` (a hand-edited log)."""
+def with_bench_metadata(log: Path, destination: Path, drop_topics: tuple[str, ...] = (), **changes: str) -> Path:
+    """A copy of ``log`` whose ``bench`` metadata has ``changes`` (a hand-edited log),
+    without the messages of ``drop_topics``."""
     with log.open("rb") as source, destination.open("wb") as copy:
         reader, writer = make_reader(source), Writer(copy)
         writer.start(profile=reader.get_header().profile, library="test")
@@ -69,6 +70,8 @@ def with_bench_metadata(log: Path, destination: Path, **changes: str) -> Path:
         schemas: dict[int, int] = {}
         channels: dict[int, int] = {}
         for schema, channel, message in reader.iter_messages():
+            if channel.topic in drop_topics:
+                continue
             if schema.id not in schemas:
                 schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
             if channel.id not in channels:
@@ -333,3 +336,12 @@ def test_imus_fused_without_magnetometers_say_their_heading_figures_measure_noth
     notice = json.loads(out.read_text())["heading_unobservable"]
     assert notice is not None and " ".join(notice.split()) in warning
     assert "imu.use_magnetometer = false" in notice and "the tilt" in notice
+
+
+def test_a_log_without_tracker_frame_numbers_says_its_gaps_are_judged_on_the_stamps(session_log, tmp_path, capsys):
+    bare = with_bench_metadata(session_log, tmp_path / "no-frames.mcap", drop_topics=("/em/frame",))
+    out = tmp_path / "s.json"
+    assert main(["sensors", str(bare), "--min-hold", "2", "--settle", "0.5", "--json", str(out)]) == 0
+    warnings = " ".join(capsys.readouterr().err.split())
+    assert f"{bare}: the log does not give every EM sample's tracker frame number" in warnings
+    assert json.loads(out.read_text())["alignment"]["gap_rule"] == "EM sample times"
