@@ -79,7 +79,9 @@ class RecordScanner:
 
     path: the file. A file that does not start with the MCAP magic, or is not a regular
         file, raises `UserError` naming it; an empty file, or one holding only the start
-        of the magic, is a log cut off before its first record and yields nothing.
+        of the magic, is a log cut off before its first record and yields nothing. A file
+        holding a second log after the first (two files concatenated) raises `UserError`
+        naming the byte where the second begins.
     open_chunks: False skips intact chunks unread (for metadata only).
 
     After iterating: `complete` (footer and closing magic found), `skipped` (the damaged
@@ -119,6 +121,12 @@ class RecordScanner:
             parsed = _record_at(data, position, open_chunks=self.open_chunks)
             if parsed is None:
                 resume = _next_intact(data, position + 1)
+                second = _second_log(data, position, len(data) if resume is None else resume)
+                if second is not None:
+                    # Read on, its chunks would be taken for this session's, under this
+                    # session's metadata and with times from another clock.
+                    raise UserError(f"{self.path} holds a second MCAP log from byte {second} (two files "
+                                    "concatenated?): split it, or give one")
                 if resume is None:
                     return  # cut off: nothing intact follows
                 chunks = summary.chunks_between(position, resume, data)
@@ -175,6 +183,19 @@ def _plausible_head(data: bytes, position: int) -> bool:
         return True
     opcode, length = _RECORD_HEAD.unpack_from(data, position)
     return opcode in _OPCODES and length < _MAX_RECORD_LENGTH
+
+
+def _second_log(data: bytes, start: int, end: int) -> int | None:
+    """Where a second log (its magic, then a header record that parses) begins between
+    ``start`` and ``end``, if one does: the first's closing magic, or the record a cut
+    left unfinished, cannot be read as a record, so a second log shows up as damage."""
+    offset = data.find(MAGIC + bytes([Opcode.HEADER]), start, end)
+    while offset >= 0:
+        parsed = _record_at(data, offset + len(MAGIC), open_chunks=False)
+        if parsed is not None and parsed[0] == Opcode.HEADER:
+            return offset
+        offset = data.find(MAGIC + bytes([Opcode.HEADER]), offset + 1, end)
+    return None
 
 
 def _next_intact(data: bytes, start: int) -> int | None:

@@ -223,3 +223,17 @@ def test_what_is_not_a_log_is_a_user_error(tmp_path: Path) -> None:
     (tmp_path / "empty.mcap").write_bytes(b"")
     empty = read_log(tmp_path / "empty.mcap")
     assert empty.truncated and empty.messages == [] and empty.metadata == {}
+
+
+def test_two_logs_concatenated_are_refused_with_where_the_second_begins(tmp_path: Path) -> None:
+    first = small_log(tmp_path / "first.mcap", chunks=2)
+    second = events_log(tmp_path / "second.mcap", chunks=2)
+    cut = cut_inside_chunk(first, 1, tmp_path / "cut.mcap")
+    for head in (first, cut):  # a finished log, and one a crash left unfinished
+        joined = tmp_path / "joined.mcap"
+        joined.write_bytes(head.read_bytes() + second.read_bytes())
+        where = f"joined.mcap holds a second MCAP log from byte {head.stat().st_size} \\(two files concatenated\\?\\)"
+        for read in (read_log, read_metadata, lambda p: recover_log(p, tmp_path / "out.mcap")):
+            with pytest.raises(UserError, match=where):
+                read(joined)
+        assert not (tmp_path / "out.mcap").exists()
