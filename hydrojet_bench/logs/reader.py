@@ -31,6 +31,7 @@ class LogDamage:
         are missing (None at an end that has no intact message).
     undecodable_messages: whole messages of the topics read that their record type
         could not read, skipped.
+    duplicated_records: messages that repeat an earlier one exactly, skipped (all topics).
     """
 
     skipped_stretches: int
@@ -39,6 +40,7 @@ class LogDamage:
     messages_lost: int | None
     lost_spans_s: tuple[tuple[float | None, float | None], ...]
     undecodable_messages: int
+    duplicated_records: int = 0
 
     def describe(self) -> str:
         """One line: what was lost."""
@@ -50,13 +52,16 @@ class LogDamage:
                          f"messages, session time {spans})")
         if self.undecodable_messages:
             parts.append(f"{self.undecodable_messages} unreadable message(s) skipped")
+        if self.duplicated_records:
+            parts.append(f"{self.duplicated_records} duplicated record(s) skipped (each an exact repeat of one "
+                         "before it)")
         return "; ".join(parts)
 
     def as_dict(self) -> dict[str, object]:
         return {"skipped_stretches": self.skipped_stretches, "skipped_bytes": self.skipped_bytes,
                 "chunks_lost": self.chunks_lost, "messages_lost": self.messages_lost,
                 "lost_spans_s": [list(span) for span in self.lost_spans_s],
-                "undecodable_messages": self.undecodable_messages}
+                "undecodable_messages": self.undecodable_messages, "duplicated_records": self.duplicated_records}
 
 
 def _time(t_s: float | None) -> str:
@@ -153,7 +158,7 @@ def damage_of(scanner: RecordScanner, undecodable: int, origin_ns: int | None) -
     """What a finished scan of ``scanner`` skipped, with ``undecodable`` messages, times
     relative to ``origin_ns`` (the log's t_s = 0, ns)."""
     skipped = scanner.skipped
-    if not skipped and not undecodable:
+    if not skipped and not undecodable and not scanner.duplicates:
         return None
 
     def session_time(log_time: int | None) -> float | None:
@@ -168,7 +173,7 @@ def damage_of(scanner: RecordScanner, undecodable: int, origin_ns: int | None) -
                      chunks_lost=sum(s.chunks for s in skipped), messages_lost=lost,
                      lost_spans_s=tuple((session_time(s.last_before_ns), session_time(s.first_after_ns))
                                         for s in skipped),
-                     undecodable_messages=undecodable)
+                     undecodable_messages=undecodable, duplicated_records=scanner.duplicates)
 
 
 def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:

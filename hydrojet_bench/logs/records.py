@@ -84,9 +84,13 @@ class RecordScanner:
         naming the byte where the second begins.
     open_chunks: False skips intact chunks unread (for metadata only).
 
+    A message that repeats an earlier one exactly (channel, sequence number, times and
+    bytes) is skipped and counted in `duplicates`.
+
     After iterating: `complete` (footer and closing magic found), `skipped` (the damaged
-    stretches), `messages_read`, and `messages_in_file` (the file's own message count,
-    from a readable summary; None without one).
+    stretches), `duplicates`, `messages_read` (duplicates included), and
+    `messages_in_file` (the file's own message count, from a readable summary; None
+    without one).
     """
 
     def __init__(self, path: str | Path, *, open_chunks: bool = True) -> None:
@@ -96,12 +100,14 @@ class RecordScanner:
         self.skipped: list[SkippedStretch] = []
         self.messages_in_file: int | None = None
         self.messages_read = 0
+        self.duplicates = 0
 
     def __iter__(self) -> Iterator[McapRecord]:
         self.complete = False
         self.skipped = []
         self.messages_in_file = None
         self.messages_read = 0
+        self.duplicates = 0
         check_regular_input(self.path)
         try:
             data = self.path.read_bytes()
@@ -117,6 +123,11 @@ class RecordScanner:
         position = len(MAGIC)
         last_log_time: int | None = None
         summary_given = False
+        # A record written twice (a tool that copied a log badly) would be analysed twice:
+        # two settled steps where the session had one. The writer numbers each channel's
+        # messages, so two messages the bench wrote alike (a held clock, a still sensor)
+        # still differ; a hash, not the bytes, keeps memory to a tuple per message.
+        seen: set[tuple[int, int, int, int, int]] = set()
         while True:
             parsed = _record_at(data, position, open_chunks=self.open_chunks)
             if parsed is None:
@@ -141,6 +152,11 @@ class RecordScanner:
             for record in records:
                 if isinstance(record, Message):
                     self.messages_read += 1
+                    key = (record.channel_id, record.sequence, record.log_time, record.publish_time, hash(record.data))
+                    if key in seen:
+                        self.duplicates += 1
+                        continue
+                    seen.add(key)
                     if self.skipped and self.skipped[-1].first_after_ns is None:
                         self.skipped[-1] = dataclasses.replace(self.skipped[-1], first_after_ns=record.log_time)
                     last_log_time = record.log_time
