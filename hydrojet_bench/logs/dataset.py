@@ -16,11 +16,14 @@ from collections import defaultdict, deque
 from pathlib import Path
 
 import numpy as np
+from mcap.records import Metadata
 
 from ..data.dataset import Dataset, SampleFlag, saturation_flags
 from ..errors import UserError
 from ..profile import RigProfile, load_profile, profile_from_mapping
-from .reader import LogContents, read_log
+from .format import LOG_METADATA_NAME
+from .reader import LogContents, damage_of, read_log
+from .records import RecordScanner
 from .topics import EmFrame, Sample, Step
 
 SAMPLE_TOPIC = Sample.topic
@@ -156,15 +159,8 @@ def rig_profile_of_log(path: Path, profile: RigProfile | str | Path | None,
         return profile_from_mapping(document, source=where)
     # Logs written before the resolved profile was embedded: the file's own text.
     text = bench.get("profile_toml")
-    if not text and not metadata and not empty_note(path):
-        # The session's metadata comes right after the header: a log without any was cut
-        # before it (or written by another program).
-        raise UserError(f"{path}: no metadata at all ({Path(path).stat().st_size} bytes): the log was cut before "
-                        "the session wrote its metadata, or another program wrote it (give its rig profile with "
-                        "--profile if it holds a session's samples)")
     if not text:
-        raise UserError(f"{path}: the log embeds no rig profile (metadata bench.profile_toml){empty_note(path)}; "
-                        "give one with --profile")
+        raise UserError(_why_no_profile(path, bench))
     where = f"{path}, metadata bench.profile_toml"
     try:
         document = tomllib.loads(text)
@@ -174,6 +170,29 @@ def rig_profile_of_log(path: Path, profile: RigProfile | str | Path | None,
     if name and "name" not in document:
         document = {**document, "name": name}
     return profile_from_mapping(document, source=where)
+
+
+def _why_no_profile(path: Path, bench: dict[str, str]) -> str:
+    """Why a log gives no rig profile, in one line. Only this error reads what the
+    metadata the readers keep leaves out: the log's own start-time record, and the
+    metadata records damage took."""
+    if bench or empty_note(path):
+        return f"{path}: the log embeds no rig profile (metadata bench.profile_toml){empty_note(path)}; give one with --profile"
+    scanner = RecordScanner(path, open_chunks=False)
+    names = {record.name for record in scanner if isinstance(record, Metadata)}
+    damage = damage_of(scanner, 0, None)
+    if damage is not None and damage.lost_metadata("bench"):
+        return f"{path}: its metadata record is damaged: the rig profile it held is lost; give --profile"
+    if names:
+        others = sorted(names - {LOG_METADATA_NAME})
+        held = f"metadata {', '.join(others)} only" if others else "only the log's start time"
+        return (f"{path}: no bench metadata record (its metadata holds {held}): the rig profile, plan and model of "
+                "the session are not in the log; give --profile")
+    # The session's metadata comes right after the header: a log without any was cut
+    # before it (or written by another program).
+    return (f"{path}: no metadata at all ({Path(path).stat().st_size} bytes): the log was cut before the session "
+            "wrote its metadata, or another program wrote it (give its rig profile with --profile if it holds a "
+            "session's samples)")
 
 
 def logged_model(path: str | Path, metadata: dict[str, dict[str, str]]) -> tuple[str, tuple[str, ...]]:

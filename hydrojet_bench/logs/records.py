@@ -22,7 +22,7 @@ from pathlib import Path
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import (Attachment, Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, McapRecord, Message,
-                          MessageIndex, Metadata, Schema, Statistics)
+                          MessageIndex, Metadata, MetadataIndex, Schema, Statistics)
 from mcap.stream_reader import breakup_chunk
 
 from ..errors import UserError
@@ -44,6 +44,7 @@ _PARSERS = {
     Opcode.CHANNEL: Channel.read, Opcode.METADATA: Metadata.read, Opcode.CHUNK: Chunk.read,
     Opcode.ATTACHMENT: Attachment.read, Opcode.DATA_END: DataEnd.read,
     Opcode.MESSAGE_INDEX: MessageIndex.read, Opcode.STATISTICS: Statistics.read, Opcode.CHUNK_INDEX: ChunkIndex.read,
+    Opcode.METADATA_INDEX: MetadataIndex.read,
 }
 _WANTED = frozenset({Opcode.HEADER, Opcode.FOOTER, Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA, Opcode.CHUNK,
                      Opcode.ATTACHMENT, Opcode.DATA_END, Opcode.MESSAGE})
@@ -61,6 +62,8 @@ class SkippedStretch:
         damage took them too).
     last_before_ns, first_after_ns: log time of the last message read before it and
         of the first read after it, ns (None if there is none).
+    metadata: names of the metadata records it held (from the file's metadata index;
+        else None for one whose name is lost with it, if it began with one).
     """
 
     start: int
@@ -69,6 +72,7 @@ class SkippedStretch:
     messages: int | None
     last_before_ns: int | None = None
     first_after_ns: int | None = None
+    metadata: tuple[str | None, ...] = ()
 
 
 class RecordScanner:
@@ -132,6 +136,12 @@ class RecordScanner:
             parsed = _record_at(data, position, open_chunks=self.open_chunks)
             if parsed is None:
                 resume = _next_intact(data, position + 1)
+                # The session's metadata records lie before any chunk: resuming at the
+                # next chunk would lose the intact ones after a damaged one (the rig
+                # profile after a damaged start time).
+                resume = min((offset for offset in summary.metadata_offsets()
+                              if position < offset < (len(data) if resume is None else resume)
+                              and _record_at(data, offset, open_chunks=False) is not None), default=resume)
                 second = _second_log(data, position, len(data) if resume is None else resume)
                 if second is not None:
                     # Read on, its chunks would be taken for this session's, under this
@@ -145,7 +155,7 @@ class RecordScanner:
                 self.skipped.append(SkippedStretch(
                     position, resume, chunks=chunks,
                     messages=0 if known_empty else _messages_indexed(data, position, resume),
-                    last_before_ns=last_log_time))
+                    last_before_ns=last_log_time, metadata=summary.metadata_between(position, resume, data)))
                 position = resume
                 continue
             opcode, records, end = parsed
@@ -276,6 +286,7 @@ class _Summary:
     schemas_and_channels: tuple[McapRecord, ...] = ()
     chunk_offsets: tuple[int, ...] | None = None
     message_count: int | None = None
+    metadata_index: tuple[MetadataIndex, ...] | None = None
 
     @classmethod
     def of(cls, data: bytes) -> _Summary:
@@ -287,6 +298,7 @@ class _Summary:
             return cls()
         kept: list[McapRecord] = []
         offsets: list[int] = []
+        metadata: list[MetadataIndex] = []
         count = None
         position = footer[0].summary_start
         while position < footer_at:
@@ -302,10 +314,20 @@ class _Summary:
                     offsets.append(record.chunk_start_offset)
                 elif isinstance(record, Statistics):
                     count = record.message_count
+                elif isinstance(record, MetadataIndex):
+                    metadata.append(record)
             position = end
-        return cls(tuple(kept), tuple(offsets), count)
+        return cls(tuple(kept), tuple(offsets), count, tuple(sorted(metadata, key=lambda index: index.offset)))
 
     def chunks_between(self, start: int, end: int, data: bytes) -> int:
         if self.chunk_offsets is not None:
             return sum(start <= offset < end for offset in self.chunk_offsets)
         return int(data[start] == Opcode.CHUNK)
+
+    def metadata_offsets(self) -> list[int]:
+        return [index.offset for index in self.metadata_index or ()]
+
+    def metadata_between(self, start: int, end: int, data: bytes) -> tuple[str | None, ...]:
+        if self.metadata_index is not None:
+            return tuple(index.name for index in self.metadata_index if start <= index.offset < end)
+        return (None,) if data[start] == Opcode.METADATA else ()
