@@ -44,17 +44,8 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
     path = Path(path)
     contents = read_log(path, topics=[SAMPLE_TOPIC, Step.topic])
     samples = contents.on(Sample)
-    rows = [sample for sample in samples if sample.source == source]
-    # A step cut while it settled (a session stopped by Ctrl-C or SIGTERM, a truncated
-    # log, a damaged chunk that took its end) is no equilibrium, and would be fitted as
-    # one: only steps a /bench/step record says finished are kept.
     finished = {(step.sweep, step.step) for step in contents.on(Step)}
-    if finished:
-        rows = [row for row in rows if (row.sweep, row.step) in finished]
-    elif contents.truncated and rows:
-        last = (rows[-1].sweep, rows[-1].step)
-        while rows and (rows[-1].sweep, rows[-1].step) == last:
-            rows.pop()
+    rows = analysed_samples([sample for sample in samples if sample.source == source], finished, contents.truncated)
     if not rows:
         raise UserError(no_samples_message(path, samples, source, len(finished), contents.truncated))
     rig = rig_profile_of_log(path, profile, contents.metadata)
@@ -82,6 +73,23 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
         )
     except ValueError as error:
         raise UserError(f"{path}: {SAMPLE_TOPIC} ({source}): {error}") from None
+
+
+def analysed_samples(samples: list[Sample], finished: set[tuple[int, int]], truncated: bool) -> list[Sample]:
+    """The ``samples`` (of a log, in file order) an analysis takes: those of the steps
+    ``finished`` ((sweep, step) of its /bench/step records) names; without any, all but
+    the run of one step a cut interrupted in a ``truncated`` log."""
+    # A step cut while it settled (a session stopped by Ctrl-C or SIGTERM, a truncated
+    # log, a damaged chunk that took its end) is no equilibrium, and would be fitted as
+    # one: only steps a /bench/step record says finished are kept.
+    if finished:
+        return [sample for sample in samples if (sample.sweep, sample.step) in finished]
+    rows = list(samples)
+    if truncated and rows:
+        last = (rows[-1].sweep, rows[-1].step)
+        while rows and (rows[-1].sweep, rows[-1].step) == last:
+            rows.pop()
+    return rows
 
 
 def em_frame_numbers(contents: LogContents, time_s: np.ndarray) -> np.ndarray | None:

@@ -18,6 +18,7 @@ from hydrojet_bench.inputs import load_dataset
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.geometry import quat_normalize
 from hydrojet_bench.logs import LogWriter, dataset_from_log, floats, read_log, recover_log
+from hydrojet_bench.logs.condition import log_condition
 from hydrojet_bench.logs.format import LOG_METADATA_NAME
 from hydrojet_bench.logs.topics import Sample
 from hydrojet_bench.profile import PROFILES_DIR, load_profile
@@ -270,3 +271,21 @@ def test_frames_that_share_a_stamp_give_their_samples_their_numbers_in_order(tmp
     np.testing.assert_array_equal(em_frame_numbers(contents, np.array(stamps)), numbers)
     # A sample without its frame's record: the log cannot say, and the caller falls back.
     assert em_frame_numbers(contents, np.array([*stamps, 0.15])) is None
+
+
+def test_without_step_records_the_notice_counts_the_steps_the_samples_give(tmp_path: Path) -> None:
+    """A log whose /bench/step records are gone (a tool that dropped the topic) is
+    analysed on its samples' labels; the notice once said "analysing the 0 logged" while
+    calibrate fitted every pose."""
+    rows = recorded_rows()
+    metadata = {"bench": {**SIM_METADATA["bench"], "plan_steps": "12"}}
+    path = write_session(tmp_path / "no_steps.mcap", rows, metadata=metadata, imu=False)
+    analysed = dataset_from_log(path)
+    assert_same(analysed, dataset_from_log(path, SIM))
+    labels = set(zip(analysed.sweep.tolist(), analysed.step.tolist()))
+    condition = log_condition(path)
+    assert not condition.whole and condition.steps_missing == 0 and condition.steps_from_samples == len(labels) == 12
+    assert condition.notice() == (f"{path}: it holds no /bench/step records (settled steps): the steps are taken "
+                                  "from the samples' sweep/step labels; 0 of 12 planned steps missing; analysing the "
+                                  f"12 labelled in the samples ({sum(sweep == -1 for sweep, _ in labels)} calibration "
+                                  "poses)")
