@@ -13,15 +13,17 @@ from __future__ import annotations
 import json
 import tomllib
 from collections import defaultdict, deque
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 from mcap.records import Metadata
 
-from ..data.dataset import Dataset, SampleFlag, saturation_flags
+from ..data.dataset import Dataset, RowError, SampleFlag, saturation_flags
 from ..errors import UserError
 from ..profile import RigProfile, load_profile, profile_from_mapping
 from .format import LOG_METADATA_NAME
+from .log_record import LogRecord
 from .reader import LogContents, damage_of, read_log
 from .records import RecordScanner
 from .topics import EmFrame, Sample, Step
@@ -71,8 +73,20 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
             flags=logged_flags | saturation_flags(forces, rig),
             profile=rig, source=str(path),
         )
+    except RowError as error:
+        raise message_error(path, SAMPLE_TOPIC, rows, error, {"time_s": "t_s"}) from None
     except ValueError as error:
         raise UserError(f"{path}: {SAMPLE_TOPIC} ({source}): {error}") from None
+
+
+def message_error(path: Path, topic: str, records: Sequence[LogRecord], error: RowError,
+                  fields: Mapping[str, str] | None = None) -> UserError:
+    """A `Dataset` row's problem said where the log has it: the message's session time
+    and its field. records: the messages, one a row; fields: Dataset fields whose
+    message field is named otherwise."""
+    field = (fields or {}).get(error.field, error.field)
+    return UserError(f"{path}, message at t_s={records[error.row].t_s!r} s: {topic}.{field}{error.separator}"
+                     f"{error.problem}")
 
 
 def analysed_samples(samples: list[Sample], finished: set[tuple[int, int]], truncated: bool) -> list[Sample]:

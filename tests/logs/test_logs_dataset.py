@@ -173,8 +173,16 @@ def test_log_problems_name_the_file(tmp_path: Path) -> None:
     with LogWriter(tmp_path / "backwards.mcap") as log:
         log.write(sample(rows, 0, t_s=1.0))
         log.write(sample(rows, 1, t_s=0.5))
-    with pytest.raises(UserError, match="backwards.mcap: /bench/sample .em.: Dataset.time_s row 1: time goes back"):
+    # Where the log has the problem, not the row of a Dataset the user never sees.
+    with pytest.raises(UserError, match=r"backwards.mcap, message at t_s=0.5 s: /bench/sample.t_s: time goes "
+                                        r"backwards \(0.5 s after 1.0 s\)$"):
         dataset_from_log(tmp_path / "backwards.mcap", SIM)
+    with LogWriter(tmp_path / "unnormalised.mcap") as log:
+        log.write(sample(rows, 0, t_s=0.0))
+        log.write(msgspec.structs.replace(sample(rows, 1, t_s=0.1), tip_orientation=(2.0, 0.0, 0.0, 0.0)))
+    with pytest.raises(UserError, match=r"unnormalised.mcap, message at t_s=0.1 s: /bench/sample.tip_orientation is "
+                                        r"not a unit quaternion \(norm 2\)$"):
+        dataset_from_log(tmp_path / "unnormalised.mcap", SIM)
     with LogWriter(tmp_path / "pulling.mcap") as log:
         log.write(msgspec.structs.replace(sample(rows, 0, t_s=0.0), jet_forces_n=(0.0, -0.01, 0.0)))
     with pytest.raises(UserError, match="pulling.mcap, message at t_s=0.0 s: .*jet forces must be >= 0 N"):
