@@ -16,12 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data.dataset import Dataset, SampleFlag
+from ..data.dataset import Dataset, RowError, SampleFlag
 from ..errors import ConvergenceError, UserError
 from ..estimation.online import OnlineSettings
 from ..estimation.path import PathPredictor, StepPrediction
 from ..logs import read_log
-from ..logs.dataset import logged_model, rig_profile_of_log
+from ..logs.dataset import logged_model, message_error, rig_profile_of_log
 from ..logs.topics import ModelPrediction, Parameters, Step
 from ..model_choice import ModelDefaults
 from ..models.shooting import ShootingModel
@@ -93,6 +93,8 @@ def read_session(path: Path, profile: RigProfile | str | Path | None = None) -> 
                         # still turned says something the analysis must repeat.
                         flags=np.array([row.flags for row in records], dtype=np.int64) & int(SampleFlag.UNSETTLED),
                         profile=rig, source=str(path))
+    except RowError as error:
+        raise message_error(path, STEP_TOPIC, records, error) from None
     except ValueError as error:
         raise UserError(f"{path}: {STEP_TOPIC} messages are not complete settled steps ({error})") from None
     model_name, effects = logged_model(path, contents.metadata)

@@ -40,6 +40,16 @@ MAX_ABS_TIME_S = 1e10  # a Unix time up to the year 2286; session times are far 
 MAX_JET_FORCE_N = 100.0  # the bench's water jets deliver well under 1 N
 
 
+class RowError(ValueError):
+    """A row of a `Dataset` field that breaks its contract. ``field``, ``row`` (0-based)
+    and ``problem`` apart, for a reader whose rows came from elsewhere (a log's
+    messages) to name where in its own input the row is."""
+
+    def __init__(self, field: str, row: int, problem: str, separator: str = " ") -> None:
+        super().__init__(f"Dataset.{field} row {row}{separator}{problem}")
+        self.field, self.row, self.problem, self.separator = field, row, problem, separator
+
+
 class SampleFlag(enum.IntFlag):
     """What is wrong with one sample; ``SampleFlag(0)`` (``NONE``) is a good sample.
 
@@ -179,12 +189,12 @@ def _float_array(name: str, value: ArrayLike, shape_tail: tuple[int, ...], rows:
     # Over every axis but the rows: also right for an empty selection (no calibration poses).
     bad = ~np.isfinite(array).all(axis=tuple(range(1, array.ndim)))
     if np.any(bad):
-        raise ValueError(f"Dataset.{name} row {int(np.argmax(bad))} is not finite")
+        raise RowError(name, int(np.argmax(bad)), "is not finite")
     beyond = ~(np.abs(array) <= limit).all(axis=tuple(range(1, array.ndim)))
     if np.any(beyond):
         i = int(np.argmax(beyond))
-        raise ValueError(f"Dataset.{name} row {i} holds {np.abs(array[i]).max():g} {unit}, past the plausible "
-                         f"{limit:g} {unit} in magnitude")
+        raise RowError(name, i, f"holds {np.abs(array[i]).max():g} {unit}, past the plausible {limit:g} {unit} in "
+                       "magnitude")
     return array
 
 
@@ -195,7 +205,7 @@ def _int_array(name: str, value: ArrayLike, rows: int) -> np.ndarray:
     if array.dtype.kind == "f":
         bad = ~np.isfinite(array) | (array != np.round(array))
         if np.any(bad):
-            raise ValueError(f"Dataset.{name} row {int(np.argmax(bad))} is not an integer: {array[np.argmax(bad)]!r}")
+            raise RowError(name, int(np.argmax(bad)), f"is not an integer: {array[np.argmax(bad)]!r}")
     elif array.dtype.kind not in "iub":
         raise ValueError(f"Dataset.{name} must be integers, got dtype {array.dtype}")
     return array.astype(np.int64)
@@ -250,8 +260,8 @@ class Dataset:
         backwards = np.diff(time) < 0.0
         if np.any(backwards):
             i = int(np.argmax(backwards)) + 1
-            raise ValueError(f"Dataset.time_s row {i}: time goes backwards ({float(time[i])!r} s after "
-                             f"{float(time[i - 1])!r} s)")
+            raise RowError("time_s", i, f"time goes backwards ({float(time[i])!r} s after {float(time[i - 1])!r} s)",
+                           separator=": ")
         arrays: dict[str, np.ndarray | None] = {"time_s": time}
         arrays["jet_forces_n"] = _float_array("jet_forces_n", self.jet_forces_n, (3,), rows, MAX_JET_FORCE_N, "N")
         for name in ("base_orientation", "tip_orientation"):
@@ -260,7 +270,7 @@ class Dataset:
             bad = np.abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE
             if np.any(bad):
                 i = int(np.argmax(bad))
-                raise ValueError(f"Dataset.{name} row {i} is not a unit quaternion (norm {norm[i]:.6g})")
+                raise RowError(name, i, f"is not a unit quaternion (norm {norm[i]:.6g})")
             # Leave unit-norm data bit-identical (so CSV round trips are exact).
             arrays[name] = q / np.where(np.abs(norm - 1.0) > 1e-12, norm, 1.0)[:, None]
         for name in ("base_position_m", "tip_position_m"):
@@ -269,7 +279,7 @@ class Dataset:
         sweep = np.full(rows, -1, dtype=np.int64) if self.sweep is None else _int_array("sweep", self.sweep, rows)
         if np.any(sweep < -1):
             i = int(np.argmax(sweep < -1))
-            raise ValueError(f"Dataset.sweep row {i} is {sweep[i]}; sweeps are >= 0, or -1 for calibration/unlabelled")
+            raise RowError("sweep", i, f"is {sweep[i]}; sweeps are >= 0, or -1 for calibration/unlabelled")
         arrays["sweep"] = sweep
         assert arrays["jet_forces_n"] is not None
         arrays["step"] = (steps_from_runs(sweep, arrays["jet_forces_n"]) if self.step is None
@@ -278,14 +288,14 @@ class Dataset:
         unknown = (flags & ~_ALL_FLAGS) != 0
         if np.any(unknown | (flags < 0)):
             i = int(np.argmax(unknown | (flags < 0)))
-            raise ValueError(f"Dataset.flags row {i} has unknown bits: {flags[i]} (known: "
-                             f"{', '.join(f'{f.name}={f.value}' for f in SampleFlag if f.value)})")
+            raise RowError("flags", i, f"has unknown bits: {flags[i]} (known: "
+                           f"{', '.join(f'{f.name}={f.value}' for f in SampleFlag if f.value)})")
         arrays["flags"] = flags
         if self.samples is not None:
             samples = _int_array("samples", self.samples, rows)
             if np.any(samples < 1):
                 i = int(np.argmax(samples < 1))
-                raise ValueError(f"Dataset.samples row {i} is {samples[i]}; a row averages at least one sample")
+                raise RowError("samples", i, f"is {samples[i]}; a row averages at least one sample")
             arrays["samples"] = samples
         for name, array in arrays.items():
             object.__setattr__(self, name, None if array is None else _frozen(array))

@@ -13,14 +13,19 @@ from __future__ import annotations
 import json
 import tomllib
 from collections import defaultdict, deque
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
+from mcap.records import Metadata
 
-from ..data.dataset import Dataset, SampleFlag, saturation_flags
+from ..data.dataset import Dataset, RowError, SampleFlag, saturation_flags
 from ..errors import UserError
 from ..profile import RigProfile, load_profile, profile_from_mapping
-from .reader import LogContents, read_log
+from .format import LOG_METADATA_NAME
+from .log_record import LogRecord
+from .reader import LogContents, damage_of, read_log
+from .records import RecordScanner
 from .topics import EmFrame, Sample, Step
 
 SAMPLE_TOPIC = Sample.topic
@@ -41,17 +46,8 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
     path = Path(path)
     contents = read_log(path, topics=[SAMPLE_TOPIC, Step.topic])
     samples = contents.on(Sample)
-    rows = [sample for sample in samples if sample.source == source]
-    # A step cut while it settled (a session stopped by Ctrl-C or SIGTERM, a truncated
-    # log, a damaged chunk that took its end) is no equilibrium, and would be fitted as
-    # one: only steps a /bench/step record says finished are kept.
     finished = {(step.sweep, step.step) for step in contents.on(Step)}
-    if finished:
-        rows = [row for row in rows if (row.sweep, row.step) in finished]
-    elif contents.truncated and rows:
-        last = (rows[-1].sweep, rows[-1].step)
-        while rows and (rows[-1].sweep, rows[-1].step) == last:
-            rows.pop()
+    rows = analysed_samples([sample for sample in samples if sample.source == source], finished, contents.truncated)
     if not rows:
         raise UserError(no_samples_message(path, samples, source, len(finished), contents.truncated))
     rig = rig_profile_of_log(path, profile, contents.metadata)
@@ -77,8 +73,37 @@ def dataset_from_log(path: str | Path, profile: RigProfile | str | Path | None =
             flags=logged_flags | saturation_flags(forces, rig),
             profile=rig, source=str(path),
         )
+    except RowError as error:
+        raise message_error(path, SAMPLE_TOPIC, rows, error, {"time_s": "t_s"}) from None
     except ValueError as error:
         raise UserError(f"{path}: {SAMPLE_TOPIC} ({source}): {error}") from None
+
+
+def message_error(path: Path, topic: str, records: Sequence[LogRecord], error: RowError,
+                  fields: Mapping[str, str] | None = None) -> UserError:
+    """A `Dataset` row's problem said where the log has it: the message's session time
+    and its field. records: the messages, one a row; fields: Dataset fields whose
+    message field is named otherwise."""
+    field = (fields or {}).get(error.field, error.field)
+    return UserError(f"{path}, message at t_s={records[error.row].t_s!r} s: {topic}.{field}{error.separator}"
+                     f"{error.problem}")
+
+
+def analysed_samples(samples: list[Sample], finished: set[tuple[int, int]], truncated: bool) -> list[Sample]:
+    """The ``samples`` (of a log, in file order) an analysis takes: those of the steps
+    ``finished`` ((sweep, step) of its /bench/step records) names; without any, all but
+    the run of one step a cut interrupted in a ``truncated`` log."""
+    # A step cut while it settled (a session stopped by Ctrl-C or SIGTERM, a truncated
+    # log, a damaged chunk that took its end) is no equilibrium, and would be fitted as
+    # one: only steps a /bench/step record says finished are kept.
+    if finished:
+        return [sample for sample in samples if (sample.sweep, sample.step) in finished]
+    rows = list(samples)
+    if truncated and rows:
+        last = (rows[-1].sweep, rows[-1].step)
+        while rows and (rows[-1].sweep, rows[-1].step) == last:
+            rows.pop()
+    return rows
 
 
 def em_frame_numbers(contents: LogContents, time_s: np.ndarray) -> np.ndarray | None:
@@ -156,15 +181,8 @@ def rig_profile_of_log(path: Path, profile: RigProfile | str | Path | None,
         return profile_from_mapping(document, source=where)
     # Logs written before the resolved profile was embedded: the file's own text.
     text = bench.get("profile_toml")
-    if not text and not metadata and not empty_note(path):
-        # The session's metadata comes right after the header: a log without any was cut
-        # before it (or written by another program).
-        raise UserError(f"{path}: no metadata at all ({Path(path).stat().st_size} bytes): the log was cut before "
-                        "the session wrote its metadata, or another program wrote it (give its rig profile with "
-                        "--profile if it holds a session's samples)")
     if not text:
-        raise UserError(f"{path}: the log embeds no rig profile (metadata bench.profile_toml){empty_note(path)}; "
-                        "give one with --profile")
+        raise UserError(_why_no_profile(path, bench))
     where = f"{path}, metadata bench.profile_toml"
     try:
         document = tomllib.loads(text)
@@ -174,6 +192,29 @@ def rig_profile_of_log(path: Path, profile: RigProfile | str | Path | None,
     if name and "name" not in document:
         document = {**document, "name": name}
     return profile_from_mapping(document, source=where)
+
+
+def _why_no_profile(path: Path, bench: dict[str, str]) -> str:
+    """Why a log gives no rig profile, in one line. Only this error reads what the
+    metadata the readers keep leaves out: the log's own start-time record, and the
+    metadata records damage took."""
+    if bench or empty_note(path):
+        return f"{path}: the log embeds no rig profile (metadata bench.profile_toml){empty_note(path)}; give one with --profile"
+    scanner = RecordScanner(path, open_chunks=False)
+    names = {record.name for record in scanner if isinstance(record, Metadata)}
+    damage = damage_of(scanner, 0, None)
+    if damage is not None and damage.lost_metadata("bench"):
+        return f"{path}: its metadata record is damaged: the rig profile it held is lost; give --profile"
+    if names:
+        others = sorted(names - {LOG_METADATA_NAME})
+        held = f"metadata {', '.join(others)} only" if others else "only the log's start time"
+        return (f"{path}: no bench metadata record (its metadata holds {held}): the rig profile, plan and model of "
+                "the session are not in the log; give --profile")
+    # The session's metadata comes right after the header: a log without any was cut
+    # before it (or written by another program).
+    return (f"{path}: no metadata at all ({Path(path).stat().st_size} bytes): the log was cut before the session "
+            "wrote its metadata, or another program wrote it (give its rig profile with --profile if it holds a "
+            "session's samples)")
 
 
 def logged_model(path: str | Path, metadata: dict[str, dict[str, str]]) -> tuple[str, tuple[str, ...]]:

@@ -31,6 +31,9 @@ class LogDamage:
         are missing (None at an end that has no intact message).
     undecodable_messages: whole messages of the topics read that their record type
         could not read, skipped.
+    duplicated_records: messages that repeat an earlier one exactly, skipped (all topics).
+    metadata_lost: names of the metadata records in the damaged stretches (None for one
+        whose name is lost too).
     """
 
     skipped_stretches: int
@@ -39,24 +42,45 @@ class LogDamage:
     messages_lost: int | None
     lost_spans_s: tuple[tuple[float | None, float | None], ...]
     undecodable_messages: int
+    duplicated_records: int = 0
+    metadata_lost: tuple[str | None, ...] = ()
+
+    def lost_metadata(self, name: str) -> bool:
+        """Whether the metadata record ``name`` may be one the damage took."""
+        return name in self.metadata_lost or None in self.metadata_lost
 
     def describe(self) -> str:
         """One line: what was lost."""
         parts = []
-        if self.skipped_stretches:
+        # A stretch that held metadata records only is said as such: "0 damaged chunks,
+        # 0 messages" hid that the rig profile was lost.
+        only_metadata = bool(self.metadata_lost) and not self.chunks_lost and self.messages_lost == 0
+        if self.metadata_lost:
+            names = sorted({"(name unreadable)" if name is None else repr(name) for name in self.metadata_lost})
+            held = (": the rig profile, plan and model the session ran are lost with it"
+                    if self.lost_metadata("bench") else
+                    ": the session's start time is lost with it (times count from the first message)"
+                    if self.lost_metadata(LOG_METADATA_NAME) else "")
+            size = f" ({self.skipped_bytes} bytes)" if only_metadata else ""
+            parts.append(f"damaged metadata record(s) {', '.join(names)} skipped{size}{held}")
+        if self.skipped_stretches and not only_metadata:
             messages = "an unknown number of" if self.messages_lost is None else str(self.messages_lost)
             spans = ", ".join(f"{_time(start)} to {_time(end)}" for start, end in self.lost_spans_s)
             parts.append(f"{self.chunks_lost} damaged chunk(s) skipped ({self.skipped_bytes} bytes, {messages} "
                          f"messages, session time {spans})")
         if self.undecodable_messages:
             parts.append(f"{self.undecodable_messages} unreadable message(s) skipped")
+        if self.duplicated_records:
+            parts.append(f"{self.duplicated_records} duplicated record(s) skipped (each an exact repeat of one "
+                         "before it)")
         return "; ".join(parts)
 
     def as_dict(self) -> dict[str, object]:
         return {"skipped_stretches": self.skipped_stretches, "skipped_bytes": self.skipped_bytes,
                 "chunks_lost": self.chunks_lost, "messages_lost": self.messages_lost,
                 "lost_spans_s": [list(span) for span in self.lost_spans_s],
-                "undecodable_messages": self.undecodable_messages}
+                "undecodable_messages": self.undecodable_messages, "duplicated_records": self.duplicated_records,
+                "metadata_lost": list(self.metadata_lost)}
 
 
 def _time(t_s: float | None) -> str:
@@ -153,7 +177,7 @@ def damage_of(scanner: RecordScanner, undecodable: int, origin_ns: int | None) -
     """What a finished scan of ``scanner`` skipped, with ``undecodable`` messages, times
     relative to ``origin_ns`` (the log's t_s = 0, ns)."""
     skipped = scanner.skipped
-    if not skipped and not undecodable:
+    if not skipped and not undecodable and not scanner.duplicates:
         return None
 
     def session_time(log_time: int | None) -> float | None:
@@ -168,7 +192,8 @@ def damage_of(scanner: RecordScanner, undecodable: int, origin_ns: int | None) -
                      chunks_lost=sum(s.chunks for s in skipped), messages_lost=lost,
                      lost_spans_s=tuple((session_time(s.last_before_ns), session_time(s.first_after_ns))
                                         for s in skipped),
-                     undecodable_messages=undecodable)
+                     undecodable_messages=undecodable, duplicated_records=scanner.duplicates,
+                     metadata_lost=tuple(name for stretch in skipped for name in stretch.metadata))
 
 
 def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:

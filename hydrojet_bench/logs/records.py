@@ -22,7 +22,7 @@ from pathlib import Path
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import (Attachment, Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, McapRecord, Message,
-                          MessageIndex, Metadata, Schema, Statistics)
+                          MessageIndex, Metadata, MetadataIndex, Schema, Statistics)
 from mcap.stream_reader import breakup_chunk
 
 from ..errors import UserError
@@ -44,6 +44,7 @@ _PARSERS = {
     Opcode.CHANNEL: Channel.read, Opcode.METADATA: Metadata.read, Opcode.CHUNK: Chunk.read,
     Opcode.ATTACHMENT: Attachment.read, Opcode.DATA_END: DataEnd.read,
     Opcode.MESSAGE_INDEX: MessageIndex.read, Opcode.STATISTICS: Statistics.read, Opcode.CHUNK_INDEX: ChunkIndex.read,
+    Opcode.METADATA_INDEX: MetadataIndex.read,
 }
 _WANTED = frozenset({Opcode.HEADER, Opcode.FOOTER, Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA, Opcode.CHUNK,
                      Opcode.ATTACHMENT, Opcode.DATA_END, Opcode.MESSAGE})
@@ -61,6 +62,8 @@ class SkippedStretch:
         damage took them too).
     last_before_ns, first_after_ns: log time of the last message read before it and
         of the first read after it, ns (None if there is none).
+    metadata: names of the metadata records it held (from the file's metadata index;
+        else None for one whose name is lost with it, if it began with one).
     """
 
     start: int
@@ -69,6 +72,7 @@ class SkippedStretch:
     messages: int | None
     last_before_ns: int | None = None
     first_after_ns: int | None = None
+    metadata: tuple[str | None, ...] = ()
 
 
 class RecordScanner:
@@ -79,12 +83,18 @@ class RecordScanner:
 
     path: the file. A file that does not start with the MCAP magic, or is not a regular
         file, raises `UserError` naming it; an empty file, or one holding only the start
-        of the magic, is a log cut off before its first record and yields nothing.
+        of the magic, is a log cut off before its first record and yields nothing. A file
+        holding a second log after the first (two files concatenated) raises `UserError`
+        naming the byte where the second begins.
     open_chunks: False skips intact chunks unread (for metadata only).
 
+    A message that repeats an earlier one exactly (channel, sequence number, times and
+    bytes) is skipped and counted in `duplicates`.
+
     After iterating: `complete` (footer and closing magic found), `skipped` (the damaged
-    stretches), `messages_read`, and `messages_in_file` (the file's own message count,
-    from a readable summary; None without one).
+    stretches), `duplicates`, `messages_read` (duplicates included), and
+    `messages_in_file` (the file's own message count, from a readable summary; None
+    without one).
     """
 
     def __init__(self, path: str | Path, *, open_chunks: bool = True) -> None:
@@ -94,12 +104,14 @@ class RecordScanner:
         self.skipped: list[SkippedStretch] = []
         self.messages_in_file: int | None = None
         self.messages_read = 0
+        self.duplicates = 0
 
     def __iter__(self) -> Iterator[McapRecord]:
         self.complete = False
         self.skipped = []
         self.messages_in_file = None
         self.messages_read = 0
+        self.duplicates = 0
         check_regular_input(self.path)
         try:
             data = self.path.read_bytes()
@@ -115,10 +127,27 @@ class RecordScanner:
         position = len(MAGIC)
         last_log_time: int | None = None
         summary_given = False
+        # A record written twice (a tool that copied a log badly) would be analysed twice:
+        # two settled steps where the session had one. The writer numbers each channel's
+        # messages, so two messages the bench wrote alike (a held clock, a still sensor)
+        # still differ; a hash, not the bytes, keeps memory to a tuple per message.
+        seen: set[tuple[int, int, int, int, int]] = set()
         while True:
             parsed = _record_at(data, position, open_chunks=self.open_chunks)
             if parsed is None:
                 resume = _next_intact(data, position + 1)
+                # The session's metadata records lie before any chunk: resuming at the
+                # next chunk would lose the intact ones after a damaged one (the rig
+                # profile after a damaged start time).
+                resume = min((offset for offset in summary.metadata_offsets()
+                              if position < offset < (len(data) if resume is None else resume)
+                              and _record_at(data, offset, open_chunks=False) is not None), default=resume)
+                second = _second_log(data, position, len(data) if resume is None else resume)
+                if second is not None:
+                    # Read on, its chunks would be taken for this session's, under this
+                    # session's metadata and with times from another clock.
+                    raise UserError(f"{self.path} holds a second MCAP log from byte {second} (two files "
+                                    "concatenated?): split it, or give one")
                 if resume is None:
                     return  # cut off: nothing intact follows
                 chunks = summary.chunks_between(position, resume, data)
@@ -126,13 +155,18 @@ class RecordScanner:
                 self.skipped.append(SkippedStretch(
                     position, resume, chunks=chunks,
                     messages=0 if known_empty else _messages_indexed(data, position, resume),
-                    last_before_ns=last_log_time))
+                    last_before_ns=last_log_time, metadata=summary.metadata_between(position, resume, data)))
                 position = resume
                 continue
             opcode, records, end = parsed
             for record in records:
                 if isinstance(record, Message):
                     self.messages_read += 1
+                    key = (record.channel_id, record.sequence, record.log_time, record.publish_time, hash(record.data))
+                    if key in seen:
+                        self.duplicates += 1
+                        continue
+                    seen.add(key)
                     if self.skipped and self.skipped[-1].first_after_ns is None:
                         self.skipped[-1] = dataclasses.replace(self.skipped[-1], first_after_ns=record.log_time)
                     last_log_time = record.log_time
@@ -175,6 +209,19 @@ def _plausible_head(data: bytes, position: int) -> bool:
         return True
     opcode, length = _RECORD_HEAD.unpack_from(data, position)
     return opcode in _OPCODES and length < _MAX_RECORD_LENGTH
+
+
+def _second_log(data: bytes, start: int, end: int) -> int | None:
+    """Where a second log (its magic, then a header record that parses) begins between
+    ``start`` and ``end``, if one does: the first's closing magic, or the record a cut
+    left unfinished, cannot be read as a record, so a second log shows up as damage."""
+    offset = data.find(MAGIC + bytes([Opcode.HEADER]), start, end)
+    while offset >= 0:
+        parsed = _record_at(data, offset + len(MAGIC), open_chunks=False)
+        if parsed is not None and parsed[0] == Opcode.HEADER:
+            return offset
+        offset = data.find(MAGIC + bytes([Opcode.HEADER]), offset + 1, end)
+    return None
 
 
 def _next_intact(data: bytes, start: int) -> int | None:
@@ -239,6 +286,7 @@ class _Summary:
     schemas_and_channels: tuple[McapRecord, ...] = ()
     chunk_offsets: tuple[int, ...] | None = None
     message_count: int | None = None
+    metadata_index: tuple[MetadataIndex, ...] | None = None
 
     @classmethod
     def of(cls, data: bytes) -> _Summary:
@@ -250,6 +298,7 @@ class _Summary:
             return cls()
         kept: list[McapRecord] = []
         offsets: list[int] = []
+        metadata: list[MetadataIndex] = []
         count = None
         position = footer[0].summary_start
         while position < footer_at:
@@ -265,10 +314,20 @@ class _Summary:
                     offsets.append(record.chunk_start_offset)
                 elif isinstance(record, Statistics):
                     count = record.message_count
+                elif isinstance(record, MetadataIndex):
+                    metadata.append(record)
             position = end
-        return cls(tuple(kept), tuple(offsets), count)
+        return cls(tuple(kept), tuple(offsets), count, tuple(sorted(metadata, key=lambda index: index.offset)))
 
     def chunks_between(self, start: int, end: int, data: bytes) -> int:
         if self.chunk_offsets is not None:
             return sum(start <= offset < end for offset in self.chunk_offsets)
         return int(data[start] == Opcode.CHUNK)
+
+    def metadata_offsets(self) -> list[int]:
+        return [index.offset for index in self.metadata_index or ()]
+
+    def metadata_between(self, start: int, end: int, data: bytes) -> tuple[str | None, ...]:
+        if self.metadata_index is not None:
+            return tuple(index.name for index in self.metadata_index if start <= index.offset < end)
+        return (None,) if data[start] == Opcode.METADATA else ()

@@ -15,8 +15,8 @@ from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
 from ..errors import UserError
-from ..files import publish
-from .reader import LogDamage, damage_of, start_time_ns
+from ..files import OVERWRITE_HINT, publish
+from .reader import LogDamage, damage_of, read_metadata, start_time_ns
 from .records import RecordScanner
 from .format import LOG_METADATA_NAME, RECOVERY_METADATA_NAME
 from .writer import LIBRARY
@@ -53,12 +53,32 @@ def recover_log(src: str | Path, dst: str | Path, *, overwrite: bool = False) ->
     src, dst = Path(src), Path(dst)
     if dst.resolve() == src.resolve():
         raise UserError(f"{dst}: the recovered log must not overwrite its source; choose another output")
+    if dst.is_file() and not overwrite:
+        # "A recovered log already exists there" read as a stale copy to replace, when
+        # it may be a session's own log.
+        raise UserError(f"{dst}: {_what_is_at(dst)}; {OVERWRITE_HINT}")
 
     def write(partial: Path) -> RecoveryReport:
         with partial.open("wb") as handle:
             return _copy(RecordScanner(src), Writer(handle, compression=CompressionType.ZSTD), str(src))
 
     return publish(dst, "recovered log", write, overwrite=overwrite)
+
+
+def _what_is_at(path: Path) -> str:
+    """What the existing file ``path`` is, said as "... already exists there"."""
+    if path.stat().st_size == 0:
+        return "an empty file already exists there"
+    try:
+        metadata = read_metadata(path)
+    except UserError:
+        return "a file that is no MCAP log already exists there"
+    if RECOVERY_METADATA_NAME in metadata:
+        return "a recovered log already exists there"
+    if "bench" in metadata:
+        return ("a session log already exists there (a session's own record, not a recovered copy: --overwrite "
+                "would lose it)")
+    return "an MCAP file that is no recovered log already exists there"
 
 
 def _copy(scanner: RecordScanner, writer: Writer, source: str) -> RecoveryReport:

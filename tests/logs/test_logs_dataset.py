@@ -9,13 +9,17 @@ import msgspec
 import numpy as np
 import pytest
 from log_examples import EXAMPLES
+from mcap.reader import make_reader
+from mcap.writer import Writer
 
 from hydrojet_bench.commands.common import load_steps
 from hydrojet_bench.data import Dataset, SampleFlag, read_csv, saturation_flags, write_csv
 from hydrojet_bench.inputs import load_dataset
 from hydrojet_bench.errors import UserError
 from hydrojet_bench.geometry import quat_normalize
-from hydrojet_bench.logs import LogWriter, dataset_from_log, floats, read_log
+from hydrojet_bench.logs import LogWriter, dataset_from_log, floats, read_log, recover_log
+from hydrojet_bench.logs.condition import log_condition
+from hydrojet_bench.logs.format import LOG_METADATA_NAME
 from hydrojet_bench.logs.topics import Sample
 from hydrojet_bench.profile import PROFILES_DIR, load_profile
 
@@ -150,9 +154,6 @@ def test_a_step_whose_end_a_damaged_chunk_took_is_not_analysed(tmp_path: Path) -
 def test_log_problems_name_the_file(tmp_path: Path) -> None:
     rows = recorded_rows()
     no_profile = write_session(tmp_path / "bare.mcap", rows, metadata={}, imu=False)
-    with pytest.raises(UserError,
-                       match=r"bare.mcap: no metadata at all \(\d+ bytes\).*give its rig profile with --profile"):
-        dataset_from_log(no_profile)
     with pytest.raises(UserError, match="bare.mcap: no /bench/sample samples from source 'imu': it has samples "
                                         "from em only"):
         dataset_from_log(no_profile, SIM, source="imu")
@@ -172,8 +173,16 @@ def test_log_problems_name_the_file(tmp_path: Path) -> None:
     with LogWriter(tmp_path / "backwards.mcap") as log:
         log.write(sample(rows, 0, t_s=1.0))
         log.write(sample(rows, 1, t_s=0.5))
-    with pytest.raises(UserError, match="backwards.mcap: /bench/sample .em.: Dataset.time_s row 1: time goes back"):
+    # Where the log has the problem, not the row of a Dataset the user never sees.
+    with pytest.raises(UserError, match=r"backwards.mcap, message at t_s=0.5 s: /bench/sample.t_s: time goes "
+                                        r"backwards \(0.5 s after 1.0 s\)$"):
         dataset_from_log(tmp_path / "backwards.mcap", SIM)
+    with LogWriter(tmp_path / "unnormalised.mcap") as log:
+        log.write(sample(rows, 0, t_s=0.0))
+        log.write(msgspec.structs.replace(sample(rows, 1, t_s=0.1), tip_orientation=(2.0, 0.0, 0.0, 0.0)))
+    with pytest.raises(UserError, match=r"unnormalised.mcap, message at t_s=0.1 s: /bench/sample.tip_orientation is "
+                                        r"not a unit quaternion \(norm 2\)$"):
+        dataset_from_log(tmp_path / "unnormalised.mcap", SIM)
     with LogWriter(tmp_path / "pulling.mcap") as log:
         log.write(msgspec.structs.replace(sample(rows, 0, t_s=0.0), jet_forces_n=(0.0, -0.01, 0.0)))
     with pytest.raises(UserError, match="pulling.mcap, message at t_s=0.0 s: .*jet forces must be >= 0 N"):
@@ -181,6 +190,58 @@ def test_log_problems_name_the_file(tmp_path: Path) -> None:
     (tmp_path / "notes.mcap").write_text("t,q1\n")
     with pytest.raises(UserError, match="notes.mcap: not an MCAP file"):
         load_dataset(tmp_path / "notes.mcap", None)
+
+
+def test_a_log_without_its_rig_profile_says_why(tmp_path: Path) -> None:
+    rows = recorded_rows(rows=15)
+    session = write_session(tmp_path / "session.mcap", rows, imu=False)
+    with session.open("rb") as handle:
+        reader = make_reader(handle)
+        indexes = {index.name: index for index in reader.get_summary().metadata_indexes}
+        schema, channel, _ = next(reader.iter_messages(topics=[Sample.topic]))
+        messages = [message for _, _, message in reader.iter_messages(topics=[Sample.topic])]
+    # Another program's copy of the samples, without a metadata record.
+    with (tmp_path / "none.mcap").open("wb") as handle:
+        writer = Writer(handle)
+        writer.start()
+        samples = writer.register_channel(channel.topic, channel.message_encoding,
+                                          writer.register_schema(schema.name, schema.encoding, schema.data))
+        for message in messages:
+            writer.add_message(samples, message.log_time, message.data, message.publish_time, message.sequence)
+        writer.finish()
+    with pytest.raises(UserError,
+                       match=r"none.mcap: no metadata at all \(\d+ bytes\).*give its rig profile with --profile"):
+        dataset_from_log(tmp_path / "none.mcap")
+    for name, metadata, held in (("bare.mcap", {}, "only the log's start time"),
+                                 ("operator.mcap", {"operator": {"name": "A"}}, "metadata operator only")):
+        write_session(tmp_path / name, rows, metadata=metadata, imu=False)
+        with pytest.raises(UserError, match=f"{name}: no bench metadata record \\(its metadata holds {held}\\): the "
+                                            "rig profile, plan and model of the session are not in the log; give "
+                                            "--profile"):
+            dataset_from_log(tmp_path / name)
+
+    def damaged(name: str) -> Path:
+        data = bytearray(session.read_bytes())
+        data[indexes[name].offset + indexes[name].length // 2] ^= 0xFF
+        path = tmp_path / f"damaged_{name}.mcap"
+        path.write_bytes(bytes(data))
+        return path
+
+    lost = damaged("bench")
+    with pytest.raises(UserError, match="damaged_bench.mcap: its metadata record is damaged: the rig profile it "
+                                        "held is lost; give --profile"):
+        dataset_from_log(lost)
+    assert_same(dataset_from_log(lost, SIM), dataset_from_log(session, SIM))
+    damage = read_log(lost).damage
+    assert damage is not None and damage.metadata_lost == ("bench",)
+    said = (f"damaged metadata record(s) 'bench' skipped ({damage.skipped_bytes} bytes): the rig profile, plan and "
+            "model the session ran are lost with it")
+    assert damage.describe() == said
+    assert recover_log(lost, tmp_path / "recovered.mcap").damage.describe() == said
+    # A damaged start time does not cost the rig profile after it.
+    start_lost = damaged(LOG_METADATA_NAME)
+    assert dataset_from_log(start_lost).profile.name == "sim"
+    assert read_log(start_lost).damage.metadata_lost == (LOG_METADATA_NAME,)
 
 
 def test_a_log_keeps_the_profile_its_session_used_whatever_its_parent_becomes(tmp_path: Path, monkeypatch) -> None:
@@ -218,3 +279,21 @@ def test_frames_that_share_a_stamp_give_their_samples_their_numbers_in_order(tmp
     np.testing.assert_array_equal(em_frame_numbers(contents, np.array(stamps)), numbers)
     # A sample without its frame's record: the log cannot say, and the caller falls back.
     assert em_frame_numbers(contents, np.array([*stamps, 0.15])) is None
+
+
+def test_without_step_records_the_notice_counts_the_steps_the_samples_give(tmp_path: Path) -> None:
+    """A log whose /bench/step records are gone (a tool that dropped the topic) is
+    analysed on its samples' labels; the notice once said "analysing the 0 logged" while
+    calibrate fitted every pose."""
+    rows = recorded_rows()
+    metadata = {"bench": {**SIM_METADATA["bench"], "plan_steps": "12"}}
+    path = write_session(tmp_path / "no_steps.mcap", rows, metadata=metadata, imu=False)
+    analysed = dataset_from_log(path)
+    assert_same(analysed, dataset_from_log(path, SIM))
+    labels = set(zip(analysed.sweep.tolist(), analysed.step.tolist()))
+    condition = log_condition(path)
+    assert not condition.whole and condition.steps_missing == 0 and condition.steps_from_samples == len(labels) == 12
+    assert condition.notice() == (f"{path}: it holds no /bench/step records (settled steps): the steps are taken "
+                                  "from the samples' sweep/step labels; 0 of 12 planned steps missing; analysing the "
+                                  f"12 labelled in the samples ({sum(sweep == -1 for sweep, _ in labels)} calibration "
+                                  "poses)")

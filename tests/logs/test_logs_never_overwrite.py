@@ -93,8 +93,19 @@ def test_recover_refuses_an_existing_output(tmp_path: Path, capsys) -> None:
     taken = tmp_path / "taken.mcap"
     taken.write_bytes(b"precious")
     assert main(["recover", str(log), "-o", str(taken)]) == 2
-    assert f"{taken}: a recovered log already exists there" in one_line(capsys)
+    assert f"{taken}: a file that is no MCAP log already exists there" in one_line(capsys)
     assert taken.read_bytes() == b"precious"
+    # What is there is said: a session's own log is no stale copy to replace.
+    other = events_log(tmp_path / "other.mcap")
+    assert main(["recover", str(log), "-o", str(other)]) == 2
+    assert one_line(capsys) == (f"error: {other}: a session log already exists there (a session's own record, not "
+                                "a recovered copy: --overwrite would lose it); choose another file or pass "
+                                "--overwrite")
+    copy = tmp_path / "copy.mcap"
+    assert main(["recover", str(log), "-o", str(copy)]) == 0
+    capsys.readouterr()
+    assert main(["recover", str(log), "-o", str(copy)]) == 2
+    assert f"{copy}: a recovered log already exists there" in one_line(capsys)
     assert main(["recover", str(log), "-o", str(taken), "--overwrite"]) == 0
     assert len(read_log(taken).messages) == 12
     assert main(["recover", str(log), "-o", str(tmp_path / "missing" / "out.mcap")]) == 2

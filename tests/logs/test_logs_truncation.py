@@ -223,3 +223,44 @@ def test_what_is_not_a_log_is_a_user_error(tmp_path: Path) -> None:
     (tmp_path / "empty.mcap").write_bytes(b"")
     empty = read_log(tmp_path / "empty.mcap")
     assert empty.truncated and empty.messages == [] and empty.metadata == {}
+
+
+def test_two_logs_concatenated_are_refused_with_where_the_second_begins(tmp_path: Path) -> None:
+    first = small_log(tmp_path / "first.mcap", chunks=2)
+    second = events_log(tmp_path / "second.mcap", chunks=2)
+    cut = cut_inside_chunk(first, 1, tmp_path / "cut.mcap")
+    for head in (first, cut):  # a finished log, and one a crash left unfinished
+        joined = tmp_path / "joined.mcap"
+        joined.write_bytes(head.read_bytes() + second.read_bytes())
+        where = f"joined.mcap holds a second MCAP log from byte {head.stat().st_size} \\(two files concatenated\\?\\)"
+        for read in (read_log, read_metadata, lambda p: recover_log(p, tmp_path / "out.mcap")):
+            with pytest.raises(UserError, match=where):
+                read(joined)
+        assert not (tmp_path / "out.mcap").exists()
+
+
+def test_a_record_written_twice_is_read_once_and_counted(tmp_path: Path) -> None:
+    path = tmp_path / "doubled.mcap"
+    event = json.loads(msgspec.json.encode(EXAMPLES["/events"]))
+    with path.open("wb") as handle:
+        writer = Writer(handle)
+        writer.start()
+        schema = writer.register_schema("hydrojet_bench.Event", "jsonschema", b"{}")
+        events = writer.register_channel("/events", "json", schema)
+        for index, copies in enumerate((1, 2, 1, 3)):
+            data = json.dumps({**event, "t_s": float(index)}).encode()
+            for _ in range(copies):
+                writer.add_message(events, log_time=index * 10**9, publish_time=index * 10**9, data=data,
+                                   sequence=index)
+        # The same message under its own sequence number: the bench wrote it twice (a
+        # held clock), so it is kept.
+        writer.add_message(events, log_time=3 * 10**9, publish_time=3 * 10**9, data=data, sequence=4)
+        writer.finish()
+    contents = read_log(path)
+    assert [m.t_s for m in contents.messages] == [0.0, 1.0, 2.0, 3.0, 3.0]
+    damage = contents.damage
+    assert damage is not None and (damage.duplicated_records, damage.skipped_stretches, damage.messages_lost) == (3, 0, 0)
+    assert damage.describe().startswith("3 duplicated record(s) skipped")
+    report = recover_log(path, tmp_path / "recovered.mcap")
+    assert report.messages == 5 and report.damage == damage
+    assert read_log(tmp_path / "recovered.mcap").messages == contents.messages
