@@ -197,6 +197,10 @@ def load_study(path: Path) -> Study:
             _check_bounds(parameter, size, source, f"{key}.sizes")
         fixed = []
         for name, value in sweep.values.items():
+            if name == parameter.name:
+                # cells.expand would keep one of the two values, replacing some sizes.
+                raise UserError(f"{source}: {key}.values.{name}: {name} is the parameter swept ({key}.parameter); "
+                                "it cannot also be held fixed")
             other = _parameter(effect, name, source, f"{key}.values.{name}")
             _check_bounds(other, value, source, f"{key}.values.{name}")
             fixed.append((f"{effect.name}.{name}", value))

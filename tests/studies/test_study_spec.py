@@ -64,6 +64,9 @@ from hydrojet_bench.studies.spec import load_study
     ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.8]\n'
      '[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.8, 0.9]\n',
      "effects[1] repeats sizes of effects[0] (the same cells)"),
+    # Held fixed and swept at once, the fixed value would replace some of the sizes.
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.7, 0.9]\nvalues = {gain_1 = 0.8}\n',
+     "effects[0].values.gain_1: gain_1 is the parameter swept (effects[0].parameter); it cannot also be held fixed"),
     ('profiles = ["sim-mystery"]\n', "profiles[0] = 'sim-mystery' hides pressure_stiffening in its [twin] table"),
     ('none = false\n[[setup]]\nerror = "tracker_tilt_deg"\nsizes = [[1e308, 0.0]]\n',
      "setup[0].sizes[0]: setup error 'tracker_tilt_deg=1e+308,0': SetupErrors.tracker_tilt_deg must be angles "
