@@ -170,11 +170,20 @@ def load_study(path: Path) -> Study:
     # Every cell would fail on a profile or plan that does not load: said here, before any runs.
     for key, names, load in (("profiles", profiles, load_profile),
                              ("plans", plans, lambda name: name == "short" or choose_plan(name))):
+        files: dict[object, int] = {}
         for index, name in enumerate(names):
             try:
                 loaded = load(name)
             except UserError as error:
                 raise UserError(f"{source}: {key}[{index}]: {error}") from None
+            # A shipped profile's name and its file's path (or two paths to one plan
+            # file) differ as text, but their cells would repeat one another.
+            same = loaded.path.resolve() if key == "profiles" and loaded.path is not None else name
+            if same in files:
+                raise UserError(f"{source}: {key}[{index}] = {getattr(spec, key)[index]!r} is the same file as "
+                                f"{key}[{files[same]}] = {getattr(spec, key)[files[same]]!r} (its cells would repeat "
+                                "that entry's)")
+            files[same] = index
             hidden = getattr(getattr(loaded, "config", None), "twin", None)
             if hidden is not None and hidden.hidden_effects:
                 # Each cell hides what the spec says: the profile's own would be dropped.
@@ -206,9 +215,11 @@ def load_study(path: Path) -> Study:
             fixed.append((f"{effect.name}.{name}", value))
         qualified = f"{effect.name}.{parameter.name}"
         for earlier, (spec_before, name_before, sizes_before, _, _, fixed_before) in enumerate(sweeps):
-            if (spec_before, name_before, fixed_before) == (effect_spec, qualified, tuple(sorted(fixed))) and \
-                    set(sizes_before) & set(sizes):
-                raise UserError(f"{source}: {key} repeats sizes of effects[{earlier}] (the same cells)")
+            # A value written out at its default is the same scenario as one left out.
+            if (spec_before, name_before) == (effect_spec, qualified) and set(sizes_before) & set(sizes) and \
+                    _completed([effect], fixed_before) == _completed([effect], fixed):
+                raise UserError(f"{source}: {key} repeats sizes of effects[{earlier}] (the same cells: the same "
+                                "effect and parameter, the other values the same or at their defaults)")
         sweeps.append((effect_spec, qualified, sizes, parameter.default, parameter.unit, tuple(sorted(fixed))))
         sweep_effects.append(effect)
     pairs, pair_effects = [], []
@@ -227,9 +238,15 @@ def load_study(path: Path) -> Study:
                 raise UserError(f"{source}: {key}.values.{name}: no parameter of {', '.join(e.name for e in effects)}; "
                                 f"known: {', '.join(sorted(known))}")
             _check_bounds(known[name], value, source, f"{key}.values.{name}")
+        for earlier, (specs_before, values_before) in enumerate(pairs):
+            if set(specs_before) == set(specs) and \
+                    _completed(effects, values_before) == _completed(effects, pair.values.items()):
+                raise UserError(f"{source}: {key} repeats pairs[{earlier}] (the same effects at the same values, in "
+                                "another order or with defaults written out: the same scenario)")
         pairs.append((specs, tuple(sorted(pair.values.items()))))
         pair_effects.append(effects)
     setups = []
+    where: dict[tuple, list[tuple[str, set[str]]]] = {}  # (error, size) -> [(its key, its orientations)]
     for index, sweep in enumerate(spec.setup):
         _check_no_repeats([tuple(size) for size in sweep.sizes], source, f"setup[{index}].sizes")
         for number, orientation in enumerate(sweep.orientations):
@@ -241,6 +258,13 @@ def load_study(path: Path) -> Study:
                 parse_setup_error(setup_error_text(sweep.error, tuple(size)))
             except UserError as error:
                 raise UserError(f"{source}: setup[{index}].sizes[{number}]: {error}") from None
+            on = set(sweep.orientations or spec.orientations)
+            for earlier, orientations in where.get((sweep.error, tuple(size)), []):
+                if on & orientations:
+                    raise UserError(f"{source}: setup[{index}].sizes[{number}] repeats {earlier} on the "
+                                    f"{', '.join(sorted(on & orientations))} rod (cells of the same name, one row "
+                                    "hiding the other)")
+            where.setdefault((sweep.error, tuple(size)), []).append((f"setup[{index}].sizes[{number}]", on))
             setups.append((sweep.error, tuple(size), tuple(sweep.orientations)))
     _check_cell_count(spec, sum(len(sweep[2]) for sweep in sweeps) + len(pairs), setups, source)
     _check_each_hides_something(sweeps, sweep_effects, pairs, pair_effects, source)
@@ -268,6 +292,14 @@ def _check_each_hides_something(sweeps: list, sweep_effects: list[Effect], pairs
             raise UserError(f"{source}: pairs[{index}]: at the values given (defaults where none is), "
                             f"{', '.join(inert)} leave(s) the twin's rod as it is and hide(s) nothing; give "
                             f"pairs[{index}].values a size for each effect")
+
+
+def _completed(effects: list[Effect], values) -> tuple[tuple[str, float], ...]:
+    """``values`` ("effect.parameter" -> value) with every other parameter of ``effects``
+    at its default: equal for two spellings of one scenario."""
+    completed = {f"{effect.name}.{parameter.name}": parameter.default
+                 for effect in effects for parameter in effect.parameters}
+    return tuple(sorted({**completed, **dict(values)}.items()))
 
 
 def _inert(effects: list[Effect], values: dict[str, float]) -> tuple[str, ...]:

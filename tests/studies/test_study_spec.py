@@ -8,6 +8,7 @@ import pytest
 from study_helpers import TINY, WITH_BOOM, run_study, write_spec
 
 from hydrojet_bench.errors import UserError
+from hydrojet_bench.profile import PROFILES_DIR
 from hydrojet_bench.studies.cells import expand
 from hydrojet_bench.studies.spec import load_study
 
@@ -63,7 +64,21 @@ from hydrojet_bench.studies.spec import load_study
      "pairs[0].effects[1] = 'jet_gain' repeats pairs[0].effects[0]"),
     ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.8]\n'
      '[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.8, 0.9]\n',
-     "effects[1] repeats sizes of effects[0] (the same cells)"),
+     "effects[1] repeats sizes of effects[0] (the same cells"),
+    # The same scenarios spelled twice: refused as the repeats they are, naming both.
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.7]\n'
+     '[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.7]\nvalues = {gain_2 = 1.0}\n',
+     "effects[1] repeats sizes of effects[0] (the same cells"),
+    ('[[pairs]]\neffects = ["jet_gain", "base_compliance"]\n'
+     'values = {"jet_gain.gain_1" = 0.8, "base_compliance.compliance_rad_per_nm" = 20.0}\n'
+     '[[pairs]]\neffects = ["base_compliance", "jet_gain"]\n'
+     'values = {"jet_gain.gain_1" = 0.8, "base_compliance.compliance_rad_per_nm" = 20.0, "jet_gain.gain_2" = 1.0}\n',
+     "pairs[1] repeats pairs[0] (the same effects at the same values"),
+    ('[[setup]]\nerror = "tracker_tilt_deg"\nsizes = [[2.0, 1.0]]\n'
+     '[[setup]]\nerror = "tracker_tilt_deg"\nsizes = [[6.0, 0.0], [2.0, 1.0]]\n',
+     "setup[1].sizes[1] repeats setup[0].sizes[0] on the hanging rod"),
+    ('profiles = ["sim", "SHIPPED/sim.toml"]\n',
+     "profiles[1] = 'SHIPPED/sim.toml' is the same file as profiles[0] = 'sim'"),
     # Held fixed and swept at once, the fixed value would replace some of the sizes.
     ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.7, 0.9]\nvalues = {gain_1 = 0.8}\n',
      "effects[0].values.gain_1: gain_1 is the parameter swept (effects[0].parameter); it cannot also be held fixed"),
@@ -73,6 +88,7 @@ from hydrojet_bench.studies.spec import load_study
      "from -45 to 45 degrees"),
 ])
 def test_spec_mistakes_name_file_and_key(tmp_path: Path, body: str, message: str):
+    body, message = (text.replace("SHIPPED", str(PROFILES_DIR)) for text in (body, message))
     spec = write_spec(tmp_path, body, "bad.toml")
     with pytest.raises(UserError) as caught:
         load_study(spec)
