@@ -44,6 +44,7 @@ from ..config.loading import convert, read_toml
 from ..effects import Effect, load_effect
 from ..errors import ConvergenceError, UserError
 from ..models import MODELS
+from ..plans import Plan, calibration_plan, validation_sweeps
 from ..profile import load_profile
 from ..twin.hidden import inert_effects
 from ..twin.setup_errors import parse_setup_error, setup_error_text
@@ -61,6 +62,9 @@ MAX_CELLS = 100_000
 MAX_NOISE_SCALE = 50.0
 # The rows keep the seed in an int64 column.
 MAX_SEED = 2**63 - 1
+# "short": 12 calibration poses and every jet swept twice (5 steps up, 5 down): the
+# smallest plan whose split still holds out a repetition of each sweep.
+SHORT_POSES, SHORT_STEPS_UP = 12, 5
 
 
 class SizeRange(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
@@ -147,6 +151,13 @@ class Study(msgspec.Struct, frozen=True):
     setups: tuple[tuple[str, tuple[float, ...], tuple[str, ...]], ...] = ()
 
 
+def study_plan(name: str, seed: int) -> Plan:
+    """"short" (see `SHORT_POSES`), or any plan `choose_plan` knows (a built-in or a file)."""
+    if name == "short":
+        return calibration_plan(SHORT_POSES, seed=seed) + validation_sweeps(steps_up=SHORT_STEPS_UP, repetitions=2)
+    return choose_plan(name, seed=seed)
+
+
 def load_study(path: Path) -> Study:
     """The study spec at ``path``, checked (`UserError` naming file and key)."""
     source = str(path)
@@ -169,7 +180,7 @@ def load_study(path: Path) -> Study:
     plans = tuple(_relative(name, folder) for name in spec.plans)
     # Every cell would fail on a profile or plan that does not load: said here, before any runs.
     for key, names, load in (("profiles", profiles, load_profile),
-                             ("plans", plans, lambda name: name == "short" or choose_plan(name))):
+                             ("plans", plans, lambda name: study_plan(name, 0))):
         files: dict[object, int] = {}
         for index, name in enumerate(names):
             try:
@@ -184,6 +195,11 @@ def load_study(path: Path) -> Study:
                                 f"{key}[{files[same]}] = {getattr(spec, key)[files[same]]!r} (its cells would repeat "
                                 "that entry's)")
             files[same] = index
+            if key == "plans" and not (loaded.sweeps >= 0).any():
+                # Every cell would fail in the diagnosis' split, after its simulation.
+                raise UserError(f"{source}: plans[{index}] = {spec.plans[index]!r} has no sweep steps (sweep >= 0), "
+                                "which diagnose holds out: give a plan with validation sweeps (short, paper, or a "
+                                "plan file whose steps include sweeps)")
             hidden = getattr(getattr(loaded, "config", None), "twin", None)
             if hidden is not None and hidden.hidden_effects:
                 # Each cell hides what the spec says: the profile's own would be dropped.

@@ -29,6 +29,8 @@ from hydrojet_bench.studies.spec import load_study
     # Every cell would fail on these: refused before any runs.
     ('plans = ["nope"]\n', "plans[0]: plan 'nope': neither a built-in plan"),
     ('profiles = ["nope"]\n', "profiles[0]: rig profile 'nope' not found"),
+    ('plans = ["short", "calibration:12"]\n',
+     "plans[1] = 'calibration:12' has no sweep steps (sweep >= 0), which diagnose holds out: give a plan with"),
     ('orientations = ["upside-down"]\n', "orientations[0] must be one of 'hanging', 'horizontal', got 'upside-down'"),
     ('seeds = "zero"\n', "seeds must be a list of integers with at least 1 entry, got 'zero'"),
     ('seeds = ["zero"]\n', "seeds[0] must be an integer, got 'zero'"),
