@@ -138,6 +138,19 @@ def base_orientation(orientation: str, gravity_in_tracker_m_s2) -> tuple[float, 
     return tuple(float(value) for value in (turned if turned[0] >= 0.0 else -turned))  # type: ignore[return-value]
 
 
+def trust_columns(diagnosis: Diagnosis) -> dict:
+    """How far a verdict's fits can be trusted, as a study's and a batch's rows say it:
+    converged, the fits it rests on (the baseline's and the winner's); unconverged_fits,
+    every fit's count; bound_clipped, a named effect left on a bound."""
+    winner = diagnosis.winner
+    return {
+        "converged": bool(diagnosis.baseline.converged and (winner is None or winner.converged)),
+        "unconverged_fits": sum(not c.converged for stage in (diagnosis, *diagnosis.stages) for c in stage.ranking)
+                            + (not diagnosis.baseline.converged),
+        "bound_clipped": any(found.notes for found in diagnosis.found),
+    }
+
+
 def _diagnosis_columns(cell: Cell, diagnosis: Diagnosis) -> dict:
     winner = diagnosis.winner
     expected = expected_verdict(cell)
@@ -152,15 +165,10 @@ def _diagnosis_columns(cell: Cell, diagnosis: Diagnosis) -> dict:
         "noise_floor_deg": diagnosis.noise_floor_deg,
         "fitted": json.dumps({c.effect: {name: [value, error] for name, (value, error) in c.parameters.items()}
                               for c in diagnosis.ranking if c.error is None}),
-        # The fits the verdict rests on: the baseline's and the winner's (every fit's count
-        # is unconverged_fits).
-        "converged": bool(diagnosis.baseline.converged and (winner is None or winner.converged)),
+        **trust_columns(diagnosis),
         "found": ",".join(found.effect for found in diagnosis.found),
         "final_heldout_rmse_deg": diagnosis.found[-1].heldout_orientation_rmse_deg if diagnosis.found else None,
         "at_floor_threshold_deg": diagnosis.at_floor_threshold_deg,
-        "unconverged_fits": sum(not c.converged for stage in (diagnosis, *diagnosis.stages) for c in stage.ranking)
-                            + (not diagnosis.baseline.converged),
-        "bound_clipped": any(found.notes for found in diagnosis.found),
         "right": right_verdict(cell, diagnosis),
     }
     if cell.kind == "sweep":

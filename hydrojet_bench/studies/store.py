@@ -79,6 +79,9 @@ class RowStore:
             table = pq.read_table(part)
             if table.schema.names == self.schema.names:
                 return table.cast(self.schema)
+            if self.id_column in table.schema.names and set(table.schema.names) < set(self.schema.names):
+                # A row stored before its kind gained columns: kept, the new figures empty.
+                return pa.Table.from_pylist(table.to_pylist(), schema=self.schema)
         except (pa.ArrowException, OSError) as error:
             raise UserError(f"{part}: not a readable row ({error}); remove it, or give another folder") from None
         raise UserError(f"{part}: a row of another kind (columns {', '.join(table.schema.names[:3])}, ...): this "
