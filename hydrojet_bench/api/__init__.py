@@ -211,13 +211,13 @@ def study(spec: str | Path | None = None, output: str | Path | None = None, *, w
     if not cells:
         raise UserError(f"{spec}: the spec has no cells (none = false and no effects or pairs)")
     store = RowStore(Path(output) if output is not None else Path(f"study-{plan.name}"), ROW_COLUMNS, "cell_id")
-    if csv:  # refused before the cells run, not after
+    if csv and store.folder.is_dir():  # refused before the cells run, not after (a new folder holds none)
         check_writable_target(store.folder / "rows.csv", "row table", overwrite=True)
+    ids = {cell.id for cell in cells}
+    store.claim(str(Path(spec).resolve()), ids)
     if progress is not None:
         where = scheduler or f"a local cluster of {workers} worker{'s' if workers != 1 else ''}"
         progress(f"study {plan.name}: {len(cells)} cells on {where}, rows in {store.rows_folder}")
-    ids = {cell.id for cell in cells}
-    store.remember(ids)
     outcome = run_tasks(lambda: dask_client(scheduler, workers), run_cell, cells, [cell.id for cell in cells],
                         store, error_row=cell_row, label="cells")
     # Rows of cells this spec no longer has (it was edited, or an effect file moved) stay

@@ -96,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
             tasks.append(task)
     with tempfile.TemporaryDirectory(prefix="hydrojet-batch-") as scratch:
         store = RowStore(args.output or Path(scratch), columns, "log_id")
+        store.create()
         outcome = run_tasks(lambda: dask_client(args.scheduler, args.workers), function, tasks,
                             [task.id for task in tasks], store,
                             error_row=lambda task, text: log_row(task, columns, text), label="logs")

@@ -138,6 +138,7 @@ def test_rows_stored_before_a_kind_gained_columns_are_kept(tmp_path: Path):
     from hydrojet_bench.studies.store import RowStore
 
     store = RowStore(tmp_path, DIAGNOSE_COLUMNS, "log_id")
+    store.rows_folder.mkdir(parents=True, exist_ok=True)
     old = {name: kind for name, kind in DIAGNOSE_COLUMNS.items() if name not in ("converged", "bound_clipped")}
     row = {**log_row(LogTask("/x.csv"), old), "verdict": "none"}
     pq.write_table(pa.Table.from_pylist([row], schema=pa.schema([(n, pa.type_for_alias(k)) for n, k in old.items()])),

@@ -199,3 +199,40 @@ def test_a_bad_scheduler_a_row_table_onto_a_folder_and_foreign_rows_are_one_line
     (out / "rows" / "junk.parquet").write_text("not parquet")
     assert main(["study", "--report-only", str(out)]) == 2
     assert "not a readable row" in capsys.readouterr().err
+
+
+def test_a_folder_of_another_kind_or_another_specs_study_is_refused_before_anything_is_written(tmp_path: Path,
+                                                                                               capsys):
+    from hydrojet_bench.cli import main
+    from hydrojet_bench.studies.batch import DIAGNOSE_COLUMNS, LogTask, log_row
+    from hydrojet_bench.studies.cell import ROW_COLUMNS
+    from hydrojet_bench.studies.store import MEMBERS_FILE, RowStore
+
+    spec = write_spec(tmp_path, TINY)
+    batch = tmp_path / "batch"
+    RowStore(batch, DIAGNOSE_COLUMNS, "log_id").append(log_row(LogTask("/x.csv"), DIAGNOSE_COLUMNS, "failed"))
+    assert main(["study", str(spec), "-o", str(batch)]) == 2
+    assert "a row of another kind" in capsys.readouterr().err and not (batch / MEMBERS_FILE).exists()
+    # Another spec's study: its members (and so its report) would be replaced.
+    other = tmp_path / "other"
+    RowStore(other, ROW_COLUMNS, "cell_id").claim("/studies/library.toml", {"a", "b"})
+    before = (other / MEMBERS_FILE).read_text()
+    assert main(["study", str(spec), "-o", str(other)]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert f"{other}: holds the study of /studies/library.toml (2 cells), not of {spec}" in err
+    assert (other / MEMBERS_FILE).read_text() == before and not (other / "report").exists()
+    # The same cells, more or fewer, from another file (a copy, a narrowed spec), its own
+    # spec edited, and a folder from before members named the spec: the same study.
+    store = RowStore(other, ROW_COLUMNS, "cell_id")
+    store.claim(str(spec), {"a", "b"})
+    store.claim("/elsewhere/copy.toml", {"a", "b"})
+    store.claim("/elsewhere/copy.toml", {"a", "b", "c"})
+    store.claim("/elsewhere/narrow.toml", {"a"})
+    with pytest.raises(UserError, match="holds the study of /elsewhere/narrow.toml"):
+        store.claim("/elsewhere/another.toml", {"b"})
+    (other / MEMBERS_FILE).write_text('["a"]')
+    store.claim(str(spec), {"d"})
+    assert store.members() == {"d"}
+    fresh = tmp_path / "fresh"
+    RowStore(fresh, ROW_COLUMNS, "cell_id")
+    assert not fresh.exists()
