@@ -104,6 +104,8 @@ def test_per_step_tables_hold_commands_poses_and_errors(mystery, tmp_path):
     (lambda data, tmp: hj.diagnose(data, workers=0), "workers must be at least 1"),
     (lambda data, tmp: hj.replay(tmp / "none.mcap"), "none.mcap"),
     (lambda data, tmp: hj.study(tmp / "none.toml"), "none.toml"),
+    (lambda data, tmp: hj.study(report_only=True), "give output=DIR"),
+    (lambda data, tmp: hj.study(tmp / "none.toml", tmp, report_only=True), "give spec or report_only, not both"),
 ])
 def test_mistakes_raise_user_error_naming_the_file_or_argument(mystery, tmp_path, call, message):
     (tmp_path / "data.txt").write_text("t,q1\n")
@@ -121,3 +123,9 @@ def test_a_study_result_tables_and_plots_its_confusion(tmp_path):
     figure = result.plot()
     assert figure.axes[0].get_xlabel() == "verdict" and figure.axes[0].get_ylabel() == "hidden truth"
     assert result.to_pandas() is not rows and result.to_pandas().equals(rows)
+
+
+def test_a_study_without_diagnosed_cells_has_nothing_to_plot(tmp_path):
+    rows = pd.DataFrame({"truth": ["boom"], "verdict": [None], "error": ["boom inside the twin"]})
+    with pytest.raises(UserError, match="study tiny: no diagnosed cells in .*, nothing to plot"):
+        StudyResult("tiny", tmp_path, rows, None).plot()

@@ -193,7 +193,12 @@ def study(spec: str | Path | None = None, output: str | Path | None = None, *, w
     from ..studies.store import RowStore
 
     if report_only:
-        if output is None or not (Path(output) / "rows").is_dir():
+        if output is None:
+            raise UserError("study: report_only rebuilds the report of a result folder: give output=DIR")
+        if spec is not None:
+            raise UserError(f"study: report_only rebuilds {output}'s report from its stored rows and runs no spec; "
+                            f"give spec or report_only, not both")
+        if not (Path(output) / "rows").is_dir():
             raise UserError(f"{output}: no study results here (no rows/ folder)")
         store = RowStore(Path(output), ROW_COLUMNS, "cell_id")
         # The cells of the spec last run here; rows of cells it no longer had stay out.

@@ -14,6 +14,7 @@ import logging
 import signal
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -67,8 +68,12 @@ def dask_client(scheduler: str | None = None, workers: int = 2) -> Iterator[Any]
     with _workers_deaf_to_ctrl_c() as interrupted:
         # Workers log errors only: their warnings on a stop ("task cancelled", "still
         # alive, killing") are the stop itself, and a failed cell's row says what failed.
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=logging.ERROR)
+        with warnings.catch_warnings():
+            # distributed warns that its default dashboard port is taken even when no
+            # dashboard is asked for (dashboard_address=None): no port of ours is used.
+            warnings.filterwarnings("ignore", message=r"Port \d+ is already in use", category=UserWarning)
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   silence_logs=logging.ERROR)
     with cluster:
         if interrupted:
             raise KeyboardInterrupt  # the Ctrl-C of the start-up, now that the cluster closes

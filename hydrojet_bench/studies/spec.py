@@ -352,7 +352,9 @@ def _parameter(effect: Effect, name: str, source: str, key: str):
         if parameter.name == name:
             return parameter
     known = ", ".join(p.name for p in effect.parameters) or "none"
-    raise UserError(f"{source}: {key} = {name!r} is no parameter of {effect.name}; known: {known}")
+    # A key that is the name itself (values.gain_9) is named once, not as its own value.
+    named = f"{key}:" if key.endswith(f".{name}") else f"{key} = {name!r} is"
+    raise UserError(f"{source}: {named} no parameter of {effect.name}; known: {known}")
 
 
 def _check_bounds(parameter, value: float, source: str, key: str) -> None:

@@ -3,6 +3,7 @@ the study once the cluster is up instead of being lost."""
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
 import time
@@ -41,3 +42,21 @@ def test_ctrl_c_during_the_start_up_stops_once_the_cluster_is_up(monkeypatch: py
     assert started[0].disposition == signal.SIG_IGN and started[0].closed
     assert signal.getsignal(signal.SIGINT) is handler
     assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, set())
+
+
+def test_the_dashboard_port_warning_of_a_cluster_without_dashboard_is_silenced(monkeypatch: pytest.MonkeyPatch):
+    import warnings
+
+    class Cluster(StartingCluster):
+        def __init__(self, **kwargs: object) -> None:
+            assert kwargs["dashboard_address"] is None
+            warnings.warn("Port 8787 is already in use.\nPerhaps you already have a cluster running?", UserWarning)
+            self.closed = False
+
+    monkeypatch.setattr(distributed, "LocalCluster", Cluster)
+    monkeypatch.setattr(distributed, "Client", lambda cluster: contextlib.nullcontext(cluster))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with dask_client(workers=1):
+            pass
+    assert caught == []

@@ -84,6 +84,13 @@ from hydrojet_bench.studies.spec import load_study
     # Held fixed and swept at once, the fixed value would replace some of the sizes.
     ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.7, 0.9]\nvalues = {gain_1 = 0.8}\n',
      "effects[0].values.gain_1: gain_1 is the parameter swept (effects[0].parameter); it cannot also be held fixed"),
+    # A key naming the parameter is said once; TOML's [table] for [[table]] is named.
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.9]\nvalues = {gain_9 = 1.0}\n',
+     "effects[0].values.gain_9: no parameter of jet_gain; known: gain_1"),
+    ('[effects]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.9]\n',
+     "effects must be a list of tables, got a table (write each as a [[effects]] block)"),
+    ('[[setup]]\nerror = "jet_wiring"\nsizes = 1\n',
+     "setup[0].sizes must be a list of lists of numbers with at least 1 entry, got 1"),
     ('profiles = ["sim-mystery"]\n', "profiles[0] = 'sim-mystery' hides pressure_stiffening in its [twin] table"),
     ('none = false\n[[setup]]\nerror = "tracker_tilt_deg"\nsizes = [[1e308, 0.0]]\n',
      "setup[0].sizes[0]: setup error 'tracker_tilt_deg=1e+308,0': SetupErrors.tracker_tilt_deg must be angles "
@@ -199,6 +206,9 @@ def test_a_bad_scheduler_a_row_table_onto_a_folder_and_foreign_rows_are_one_line
     (out / "rows" / "junk.parquet").write_text("not parquet")
     assert main(["study", "--report-only", str(out)]) == 2
     assert "not a readable row" in capsys.readouterr().err
+    # A spec beside --report-only would be ignored: refused instead.
+    assert main(["study", str(spec), "--report-only", str(out)]) == 2
+    assert "runs no spec; give" in " ".join(capsys.readouterr().err.split())
 
 
 def test_a_folder_of_another_kind_or_another_specs_study_is_refused_before_anything_is_written(tmp_path: Path,
