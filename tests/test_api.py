@@ -129,3 +129,13 @@ def test_a_study_without_diagnosed_cells_has_nothing_to_plot(tmp_path):
     rows = pd.DataFrame({"truth": ["boom"], "verdict": [None], "error": ["boom inside the twin"]})
     with pytest.raises(UserError, match="study tiny: no diagnosed cells in .*, nothing to plot"):
         StudyResult("tiny", tmp_path, rows, None).plot()
+
+
+def test_a_study_called_by_a_worker_importing_the_script_asks_for_the_main_guard(monkeypatch, tmp_path):
+    import multiprocessing
+
+    # How multiprocessing marks a spawned child while it imports the parent's script.
+    monkeypatch.setattr(multiprocessing.current_process(), "_inheriting", True, raising=False)
+    with pytest.raises(UserError, match='put the call under `if __name__ == "__main__":`'):
+        hj.study(tmp_path / "spec.toml", tmp_path / "out")
+    assert not (tmp_path / "out").exists()

@@ -22,6 +22,7 @@ naming the file and field; nothing here prints (progress, when asked for, goes t
 
 from __future__ import annotations
 
+import multiprocessing
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -184,7 +185,11 @@ def study(spec: str | Path | None = None, output: str | Path | None = None, *, w
     simulated on the twin and diagnosed, rows stored under ``output`` (default
     ``study-<name>``; a rerun skips the finished cells), then the report written to
     ``output/report``. ``report_only``: rebuild the report from the rows stored in
-    ``output`` without running anything. ``progress`` receives one line on start."""
+    ``output`` without running anything. ``progress`` receives one line on start.
+
+    In a script, call it under ``if __name__ == "__main__":``: each local worker process
+    starts by importing the script, which without the guard would run the study again.
+    """
     from ..studies.cell import ROW_COLUMNS, cell_row, run_cell
     from ..studies.cells import expand
     from ..studies.engine import dask_client, run_tasks
@@ -192,6 +197,10 @@ def study(spec: str | Path | None = None, output: str | Path | None = None, *, w
     from ..studies.spec import load_study
     from ..studies.store import RowStore
 
+    # multiprocessing's own mark of a child importing the parent's main module.
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise UserError("study: called while a worker process starts, by the script it imports: put the call under "
+                        "`if __name__ == \"__main__\":` in the script")
     if report_only:
         if output is None:
             raise UserError("study: report_only rebuilds the report of a result folder: give output=DIR")
