@@ -109,6 +109,8 @@ def test_per_step_tables_hold_commands_poses_and_errors(mystery, tmp_path):
     (lambda data, tmp: hj.study(tmp / "none.toml", tmp / "out", workers=1.5), "workers must be a whole number"),
     (lambda data, tmp: hj.replay(tmp / "none.mcap"), "none.mcap"),
     (lambda data, tmp: hj.study(tmp / "none.toml"), "none.toml"),
+    (lambda data, tmp: hj.study(report_only=True), "give output=DIR"),
+    (lambda data, tmp: hj.study(tmp / "none.toml", tmp, report_only=True), "give spec or report_only, not both"),
 ])
 def test_mistakes_raise_user_error_naming_the_file_or_argument(mystery, tmp_path, call, message):
     (tmp_path / "data.txt").write_text("t,q1\n")
@@ -142,3 +144,19 @@ def test_the_diagnosis_table_says_what_the_command_table_says_of_each_fit(myster
     winner = table.iloc[0]
     assert winner["effect"] == "pressure_stiffening" and winner["converged"]
     assert set(winner["parameters"]) == set(ranking[0].parameters)
+
+
+def test_a_study_without_diagnosed_cells_has_nothing_to_plot(tmp_path):
+    rows = pd.DataFrame({"truth": ["boom"], "verdict": [None], "error": ["boom inside the twin"]})
+    with pytest.raises(UserError, match="study tiny: no diagnosed cells in .*, nothing to plot"):
+        StudyResult("tiny", tmp_path, rows, None).plot()
+
+
+def test_a_study_called_by_a_worker_importing_the_script_asks_for_the_main_guard(monkeypatch, tmp_path):
+    import multiprocessing
+
+    # How multiprocessing marks a spawned child while it imports the parent's script.
+    monkeypatch.setattr(multiprocessing.current_process(), "_inheriting", True, raising=False)
+    with pytest.raises(UserError, match='put the call under `if __name__ == "__main__":`'):
+        hj.study(tmp_path / "spec.toml", tmp_path / "out")
+    assert not (tmp_path / "out").exists()

@@ -23,7 +23,7 @@ naming the file and field; nothing here prints (progress, when asked for, goes t
 from __future__ import annotations
 
 import math
-
+import multiprocessing
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -187,7 +187,11 @@ def study(spec: str | Path | None = None, output: str | Path | None = None, *, w
     simulated on the twin and diagnosed, rows stored under ``output`` (default
     ``study-<name>``; a rerun skips the finished cells), then the report written to
     ``output/report``. ``report_only``: rebuild the report from the rows stored in
-    ``output`` without running anything. ``progress`` receives one line on start."""
+    ``output`` without running anything. ``progress`` receives one line on start.
+
+    In a script, call it under ``if __name__ == "__main__":``: each local worker process
+    starts by importing the script, which without the guard would run the study again.
+    """
     from ..studies.cell import ROW_COLUMNS, cell_row, run_cell
     from ..studies.cells import expand
     from ..studies.engine import dask_client, run_tasks
@@ -195,8 +199,17 @@ def study(spec: str | Path | None = None, output: str | Path | None = None, *, w
     from ..studies.spec import load_study
     from ..studies.store import RowStore
 
+    # multiprocessing's own mark of a child importing the parent's main module.
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise UserError("study: called while a worker process starts, by the script it imports: put the call under "
+                        "`if __name__ == \"__main__\":` in the script")
     if report_only:
-        if output is None or not (Path(output) / "rows").is_dir():
+        if output is None:
+            raise UserError("study: report_only rebuilds the report of a result folder: give output=DIR")
+        if spec is not None:
+            raise UserError(f"study: report_only rebuilds {output}'s report from its stored rows and runs no spec; "
+                            f"give spec or report_only, not both")
+        if not (Path(output) / "rows").is_dir():
             raise UserError(f"{output}: no study results here (no rows/ folder)")
         store = RowStore(Path(output), ROW_COLUMNS, "cell_id")
         # The cells of the spec last run here; rows of cells it no longer had stay out.
@@ -213,13 +226,13 @@ def study(spec: str | Path | None = None, output: str | Path | None = None, *, w
     if not cells:
         raise UserError(f"{spec}: the spec has no cells (none = false and no effects or pairs)")
     store = RowStore(Path(output) if output is not None else Path(f"study-{plan.name}"), ROW_COLUMNS, "cell_id")
-    if csv:  # refused before the cells run, not after
+    if csv and store.folder.is_dir():  # refused before the cells run, not after (a new folder holds none)
         check_writable_target(store.folder / "rows.csv", "row table", overwrite=True)
+    ids = {cell.id for cell in cells}
+    store.claim(str(Path(spec).resolve()), ids)
     if progress is not None:
         where = scheduler or f"a local cluster of {workers} worker{'s' if workers != 1 else ''}"
         progress(f"study {plan.name}: {len(cells)} cells on {where}, rows in {store.rows_folder}")
-    ids = {cell.id for cell in cells}
-    store.remember(ids)
     outcome = run_tasks(lambda: dask_client(scheduler, workers), run_cell, cells, [cell.id for cell in cells],
                         store, error_row=cell_row, label="cells")
     # Rows of cells this spec no longer has (it was edited, or an effect file moved) stay

@@ -16,6 +16,7 @@ from matplotlib.figure import Figure
 from ..analysis.compare import Comparison, compare_methods
 from ..analysis.diagnosis import Diagnosis
 from ..data.dataset import Dataset
+from ..errors import UserError
 from ..estimation.calibration import CalibrationResult
 from ..models.shooting import ShootingModel
 from ..params_io import ParameterFile, effect_specs, write_parameter_file
@@ -246,7 +247,10 @@ class StudyResult:
         return confusion_table(self.rows[self.rows["error"].isna()])
 
     def plot(self) -> Figure:
-        return figures.confusion_figure(self.confusion(), f"study {self.name}: verdict against hidden truth")
+        confusion = self.confusion()
+        if confusion.empty:  # matplotlib would draw empty axes and warn of singular limits
+            raise UserError(f"study {self.name}: no diagnosed cells in {self.folder}, nothing to plot")
+        return figures.confusion_figure(confusion, f"study {self.name}: verdict against hidden truth")
 
 
 def _table_ii(results: dict[str, Comparison]) -> pd.DataFrame:

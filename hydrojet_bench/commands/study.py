@@ -41,6 +41,9 @@ def run(args: argparse.Namespace) -> int:
     if args.workers < 1:
         raise UserError(f"--workers must be at least 1, got {args.workers}")
     if args.report_only is not None:
+        if args.spec is not None:
+            raise UserError(f"study: --report-only {args.report_only} rebuilds that folder's report from its stored "
+                            f"rows and runs no spec; give {args.spec} or --report-only, not both")
         result = study(output=args.report_only, report_only=True)
     else:
         result = study(args.spec, args.output, workers=args.workers, scheduler=args.scheduler, csv=args.csv,

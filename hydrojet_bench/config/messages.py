@@ -72,8 +72,11 @@ def explain(error: str, document: Mapping[str, Any], schema: type) -> Problem:
                        f"{_suggestion(found['field'], schema, parts)}", (*parts, found["field"]))
     if _EXPECTED.match(message) or _ENUM.match(message):
         expected = _phrase(_annotation_at(schema, parts))
-        return Problem(f"{dotted or 'the file'} must be {expected}, got {_describe(_value_at(document, parts))}",
-                       tuple(parts))
+        value = _value_at(document, parts)
+        # [name] where [[name]] was meant: TOML's two spellings differ by a bracket.
+        hint = (f" (write each as a [[{dotted}]] block)"
+                if expected == "a list of tables" and isinstance(value, Mapping) and dotted else "")
+        return Problem(f"{dotted or 'the file'} must be {expected}, got {_describe(value)}{hint}", tuple(parts))
     # A check in a table's __post_init__: its message starts with the (dotted) name of
     # the field it is about; other keys it weighs are named in the text.
     field = [*parts, *message.split(" ", 1)[0].split(".")]
@@ -237,8 +240,8 @@ def _phrase(annotation: Any) -> str:
         return _phrase(tuple[arguments[0], ...])
     if origin is tuple:
         item = _phrase(arguments[0]).removeprefix("a ").removeprefix("an ")
-        item = (item.replace("number", "numbers").replace("string", "strings").replace("integer", "integers")
-                .replace("list ", "lists "))
+        # The item's first noun only: "list of numbers" -> "lists of numbers".
+        item = re.sub(r"\b(number|string|integer|list|table)\b", r"\1s", item, count=1)
         if arguments[-1] is Ellipsis:
             return f"a list of {item}"
         return f"a list of {len(arguments)} {item}"

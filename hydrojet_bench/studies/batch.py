@@ -12,15 +12,19 @@ from pathlib import Path
 
 from ..analysis.diagnosis import DiagnosisSettings, diagnose
 from ..errors import UserError
+from .cell import trust_columns
 
 DIAGNOSE_COLUMNS: dict[str, str] = {
     "log_id": "string", "log": "string", "model": "string", "steps": "int64", "verdict": "string",
     "alternatives": "string", "baseline_heldout_rmse_deg": "float64", "winner_heldout_rmse_deg": "float64",
-    "noise_floor_deg": "float64", "log_damage": "string", "profile_mismatch": "string", "seconds": "float64",
-    "error": "string",
+    "noise_floor_deg": "float64", "converged": "bool", "unconverged_fits": "int64", "bound_clipped": "bool",
+    "log_damage": "string", "profile_mismatch": "string", "seconds": "float64", "error": "string",
 }
 REPLAY_COLUMNS: dict[str, str] = {
     "log_id": "string", "log": "string", "model": "string", "steps": "int64",
+    # Steps scored (the validation sweeps, all when there are none) and left out (the
+    # model did not converge there), as `replay` says them.
+    "scored_steps": "int64", "skipped_steps": "int64",
     "validation_orientation_rmse_deg": "float64", "live_difference_deg": "float64", "truncated": "bool", "damaged": "bool",
     "log_damage": "string", "seconds": "float64", "error": "string",
 }
@@ -71,7 +75,8 @@ def diagnose_log(task: LogTask) -> dict:
         row.update(steps=len(steps), verdict=diagnosis.verdict, alternatives=",".join(diagnosis.alternatives),
                    baseline_heldout_rmse_deg=diagnosis.baseline_heldout_rmse_deg,
                    winner_heldout_rmse_deg=None if winner is None else winner.heldout_orientation_rmse_deg,
-                   noise_floor_deg=diagnosis.noise_floor_deg, log_damage=_log_damage(task.path))
+                   noise_floor_deg=diagnosis.noise_floor_deg, log_damage=_log_damage(task.path),
+                   **trust_columns(diagnosis))
     except Exception as error:  # noqa: BLE001 - one bad log is a row, the batch goes on
         row["error"] = _one_line(error)
     row["seconds"] = time.perf_counter() - started
@@ -98,7 +103,8 @@ def replay_log(task: LogTask) -> dict:
             raise UserError("the model converged on none of the logged steps")
         results = compare_steps([estimates[i] for i in validation], session.steps.select(validation))
         condition = log_condition(task.path)
-        row.update(model=session.model_name, steps=len(session.steps), truncated=condition.truncated,
+        row.update(model=session.model_name, steps=len(session.steps), scored_steps=len(validation),
+                   skipped_steps=len(estimates) - len(kept), truncated=condition.truncated,
                    damaged=condition.damage is not None, log_damage=None if condition.whole else condition.notice(),
                    validation_orientation_rmse_deg=float(results["ref"].overall.orientation_rmse_deg),
                    live_difference_deg=live_difference_deg(session, estimates))

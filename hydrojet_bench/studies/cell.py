@@ -12,22 +12,18 @@ import time
 import traceback
 
 from ..analysis.diagnosis import UNEXPLAINED, Diagnosis, DiagnosisSettings, diagnose
-from ..bench.plan_choice import choose_plan
 from ..effects import load_effect
-from ..plans import Plan, calibration_plan, validation_sweeps
 from ..geometry import quat_multiply
 from ..profile import hanging_orientation, load_profile
 from ..analysis.diagnosis.setup import setup_hypothesis
 from ..twin import DigitalTwin, TwinConfig, parse_setup_error, setup_error_text
 from .cells import NONE, Cell
+from .spec import study_plan
 
 # From hanging to lying across gravity: a half turn about the base frame's (x + z) axis
 # takes its z to where its x was, so gravity falls along the base x axis (w, x, y, z).
 # Under the default tracker (z up) the rod then lies along the tracker's x axis.
 HANGING_TO_HORIZONTAL = (0.0, math.sqrt(0.5), 0.0, math.sqrt(0.5))
-# "short": 12 calibration poses and every jet swept twice (5 steps up, 5 down): the
-# smallest plan whose split still holds out a repetition of each sweep.
-SHORT_POSES, SHORT_STEPS_UP = 12, 5
 # The diagnosis averages each step over its last second: nothing earlier is recorded.
 RECORD_WINDOW_S = 1.0
 
@@ -42,13 +38,6 @@ ROW_COLUMNS: dict[str, str] = {
     "error": "string", "found": "string", "final_heldout_rmse_deg": "float64", "at_floor_threshold_deg": "float64",
     "unconverged_fits": "int64", "bound_clipped": "bool", "right": "bool",
 }
-
-
-def study_plan(name: str, seed: int) -> Plan:
-    """"short" (see `SHORT_POSES`), or any plan `choose_plan` knows (a built-in or a file)."""
-    if name == "short":
-        return calibration_plan(SHORT_POSES, seed=seed) + validation_sweeps(steps_up=SHORT_STEPS_UP, repetitions=2)
-    return choose_plan(name, seed=seed)
 
 
 def expected_verdict(cell: Cell) -> str | None:
@@ -149,6 +138,19 @@ def base_orientation(orientation: str, gravity_in_tracker_m_s2) -> tuple[float, 
     return tuple(float(value) for value in (turned if turned[0] >= 0.0 else -turned))  # type: ignore[return-value]
 
 
+def trust_columns(diagnosis: Diagnosis) -> dict:
+    """How far a verdict's fits can be trusted, as a study's and a batch's rows say it:
+    converged, the fits it rests on (the baseline's and the winner's); unconverged_fits,
+    every fit's count; bound_clipped, a named effect left on a bound."""
+    winner = diagnosis.winner
+    return {
+        "converged": bool(diagnosis.baseline.converged and (winner is None or winner.converged)),
+        "unconverged_fits": sum(not c.converged for stage in (diagnosis, *diagnosis.stages) for c in stage.ranking)
+                            + (not diagnosis.baseline.converged),
+        "bound_clipped": any(found.notes for found in diagnosis.found),
+    }
+
+
 def _diagnosis_columns(cell: Cell, diagnosis: Diagnosis) -> dict:
     winner = diagnosis.winner
     expected = expected_verdict(cell)
@@ -163,15 +165,10 @@ def _diagnosis_columns(cell: Cell, diagnosis: Diagnosis) -> dict:
         "noise_floor_deg": diagnosis.noise_floor_deg,
         "fitted": json.dumps({c.effect: {name: [value, error] for name, (value, error) in c.parameters.items()}
                               for c in diagnosis.ranking if c.error is None}),
-        # The fits the verdict rests on: the baseline's and the winner's (every fit's count
-        # is unconverged_fits).
-        "converged": bool(diagnosis.baseline.converged and (winner is None or winner.converged)),
+        **trust_columns(diagnosis),
         "found": ",".join(found.effect for found in diagnosis.found),
         "final_heldout_rmse_deg": diagnosis.found[-1].heldout_orientation_rmse_deg if diagnosis.found else None,
         "at_floor_threshold_deg": diagnosis.at_floor_threshold_deg,
-        "unconverged_fits": sum(not c.converged for stage in (diagnosis, *diagnosis.stages) for c in stage.ranking)
-                            + (not diagnosis.baseline.converged),
-        "bound_clipped": any(found.notes for found in diagnosis.found),
         "right": right_verdict(cell, diagnosis),
     }
     if cell.kind == "sweep":

@@ -14,6 +14,7 @@ import logging
 import signal
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -64,28 +65,46 @@ def dask_client(scheduler: str | None = None, workers: int = 2) -> Iterator[Any]
         return
     if workers < 1:
         raise UserError(f"--workers must be at least 1, got {workers}")
-    with _workers_ignoring_ctrl_c():
+    with _workers_deaf_to_ctrl_c() as interrupted:
         # Workers log errors only: their warnings on a stop ("task cancelled", "still
         # alive, killing") are the stop itself, and a failed cell's row says what failed.
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=logging.ERROR)
-    with cluster, Client(cluster) as client:
-        yield client
+        with warnings.catch_warnings():
+            # distributed warns that its default dashboard port is taken even when no
+            # dashboard is asked for (dashboard_address=None): no port of ours is used.
+            warnings.filterwarnings("ignore", message=r"Port \d+ is already in use", category=UserWarning)
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   silence_logs=logging.ERROR)
+    with cluster:
+        if interrupted:
+            raise KeyboardInterrupt  # the Ctrl-C of the start-up, now that the cluster closes
+        with Client(cluster) as client:
+            yield client
 
 
 @contextlib.contextmanager
-def _workers_ignoring_ctrl_c() -> Iterator[None]:
+def _workers_deaf_to_ctrl_c() -> Iterator[list[int]]:
     """Start worker processes with SIGINT ignored (a process started so keeps it ignored,
     and Python then installs no KeyboardInterrupt handler): Ctrl-C reaches the terminal's
     whole process group, and each worker printed its own traceback before the study
-    stopped them. The study itself still stops on Ctrl-C and closes the cluster."""
+    stopped them. A Ctrl-C meanwhile is kept for the caller to stop on once the cluster is
+    up (the list yielded holds it): ignored alone, it was lost and the study ran on."""
+    interrupted: list[int] = []
     if threading.current_thread() is not threading.main_thread():
-        yield  # signal handlers are the main thread's to set
+        yield interrupted  # signal handlers are the main thread's to set
         return
+    # Linux keeps a blocked signal pending even while it is ignored: unblocked after the
+    # handler is back, it is delivered then. It is still lost elsewhere, or when a thread
+    # that does not block it (a native library's, started earlier) takes it.
+    blocking = hasattr(signal, "pthread_sigmask")
+    if blocking:
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        yield
+        yield interrupted
     finally:
+        signal.signal(signal.SIGINT, lambda number, frame: interrupted.append(number))
+        if blocking:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # runs the handler on a pending SIGINT
         signal.signal(signal.SIGINT, previous)
 
 

@@ -2,14 +2,15 @@
 
 * confusion matrix, hidden truth x verdict, one panel per plan;
 * detection power against effect size per swept effect parameter: the share of cells
-  (seeds, noise levels ...) whose verdict is right, one line per plan/model/orientation,
+  (seeds) whose verdict is right, one line per setting (`setting_columns`),
   log x when the sizes span a decade or more; the smallest size detected in at least
   `POWER_LEVEL` of the cells is the protocol's detection limit;
 * parameter recovery: fitted minus true over the fit's standard error (a z score) of the
   swept parameter, per effect, when the diagnosis fitted it; the recovery table gives,
   per effect, the share of cells where the effect was detected whose true value lies
   within 2 standard errors (`COVERAGE_Z`), the coverage honest errors give ~95 %;
-* plans side by side: the share of verdicts naming the hidden effect per truth and plan.
+* plans side by side: the share of verdicts naming the hidden effect per truth and plan
+  (and profile and noise level where the study has several).
 """
 
 from __future__ import annotations
@@ -32,6 +33,12 @@ COVERAGE_Z = 2.0
 # Sizes spanning this ratio or more are plotted on a log axis.
 LOG_SPAN = 10.0
 SETTING = ["plan", "model", "orientation"]
+# Also part of a setting where the rows hold more than one: a share pooled over noise
+# levels or rigs answers none of the questions such a study asks.
+VARIED = ["profile", "noise_scale"]
+# Names of the setting's columns in legends and axis labels.
+LEGEND_TITLES = {"truth": "hidden truth", "plan": "plan", "model": "model", "orientation": "rod",
+                 "profile": "profile", "noise_scale": "noise"}
 MARKERS = ("o", "s", "^", "D", "v", "P")
 DASHES = ("-", "--", ":", "-.")
 
@@ -61,17 +68,32 @@ def confusion_table(rows: pd.DataFrame) -> pd.DataFrame:
     return pd.crosstab(rows["truth"], rows["verdict"])
 
 
+def setting_columns(rows: pd.DataFrame) -> list[str]:
+    """What tells one setting's cells from another's: `SETTING`, and each of `VARIED`
+    that takes more than one value in ``rows``."""
+    return SETTING + [column for column in VARIED if column in rows and rows[column].nunique() > 1]
+
+
 def detection_limits(sweeps: pd.DataFrame) -> pd.DataFrame:
     """Per swept parameter and setting: the detection rate at each size and the
     smallest size detected in at least `POWER_LEVEL` of the cells (NaN: never)."""
-    power = (sweeps.groupby(["truth", "parameter", *SETTING, "size"])["detected"].agg(["mean", "count"])
+    setting = setting_columns(sweeps)
+    power = (sweeps.groupby(["truth", "parameter", *setting, "size"])["detected"].agg(["mean", "count"])
              .reset_index())
     limits = []
-    for key, group in power.groupby(["truth", "parameter", *SETTING]):
+    for key, group in power.groupby(["truth", "parameter", *setting]):
         reached = group[group["mean"] >= POWER_LEVEL]
         default = sweeps[sweeps["parameter"] == key[1]]["size_default"].iloc[0]
         limits.append((*key, _smallest(reached["size"], default), len(group), int(group["count"].sum())))
-    return pd.DataFrame(limits, columns=["truth", "parameter", *SETTING, "smallest_detected", "sizes", "cells"])
+    return pd.DataFrame(limits, columns=["truth", "parameter", *setting, "smallest_detected", "sizes", "cells"])
+
+
+def plans_table(rows: pd.DataFrame) -> pd.DataFrame:
+    """The share of verdicts naming the hidden effect (single effects and none), per
+    truth (and profile and noise level where they vary, `setting_columns`) and plan."""
+    single = rows[rows["kind"] != "pair"]
+    index = ["truth", *(column for column in setting_columns(single) if column in VARIED)]
+    return single.pivot_table(index=index, columns="plan", values="detected", aggfunc="mean")
 
 
 def recovery_table(sweeps: pd.DataFrame) -> pd.DataFrame:
@@ -124,10 +146,8 @@ def summary_markdown(rows: pd.DataFrame) -> str:
                     lines += [f"## Recovery table: where the effect was detected, the true value within "
                               f"{COVERAGE_Z:g} standard errors ({covered} of {fitted} cells, "
                               f"{covered / fitted:.0%})", "", _markdown(table), ""]
-        by_plan = finished[finished["kind"] != "pair"].pivot_table(index="truth", columns="plan", values="detected",
-                                                                  aggfunc="mean")
         lines += ["## Plans side by side (share of verdicts naming the hidden effect)", "",
-                  _markdown(by_plan.reset_index()), ""]
+                  _markdown(plans_table(finished).reset_index()), ""]
     if len(failed):
         lines += ["## Failed cells", "", _markdown(failed[["scenario", "seed", "plan", "model", "error"]]), ""]
     return "\n".join(lines)
@@ -188,18 +208,19 @@ def _confusion(folder: Path, rows: pd.DataFrame) -> Path:
 
 def _power(folder: Path, sweeps: pd.DataFrame) -> Path:
     parameters = sorted(sweeps["parameter"].unique())
+    setting = setting_columns(sweeps)  # of the whole study: every panel's legend alike
     columns = min(3, len(parameters))
     lines = (len(parameters) + columns - 1) // columns
     figure, axes = plt.subplots(lines, columns, figsize=(4.5 * columns, 3.4 * lines), squeeze=False,
                                 layout="constrained")
     for axis, parameter in zip(axes.flat, parameters):
         group = sweeps[sweeps["parameter"] == parameter]
-        for line, (setting, part) in enumerate(group.groupby(SETTING)):
+        for line, (values, part) in enumerate(group.groupby(setting)):
             rate = part.groupby("size")["detected"].mean()
             # Settings often agree: markers and dashes that differ keep every line visible.
             axis.plot(rate.index, rate.to_numpy(), marker=MARKERS[line % len(MARKERS)],
                       linestyle=DASHES[line % len(DASHES)], markersize=8 - 1.5 * (line % 3),
-                      label=" / ".join(Path(s).name for s in setting))
+                      label=_setting_label(setting, values))
         sizes = group["size"].abs()
         positive = sizes[sizes > 0]
         if len(positive) and (group["size"] > 0).all() and positive.max() / positive.min() >= LOG_SPAN:
@@ -210,11 +231,16 @@ def _power(folder: Path, sweeps: pd.DataFrame) -> Path:
         axis.set_xlabel(f"{parameter} ({group['unit'].iloc[0]})")
         axis.set_ylabel("share detected")
         axis.set_title(group["truth"].iloc[0])
-        axis.legend(fontsize=7, title="plan / model / rod", title_fontsize=7)
+        axis.legend(fontsize=7, title=" / ".join(LEGEND_TITLES[column] for column in setting), title_fontsize=7)
     for axis in list(axes.flat)[len(parameters):]:
         axis.set_visible(False)
     figure.suptitle(f"Detection power against effect size (dotted: {POWER_LEVEL:.0%})")
     return _save(figure, folder / "power.png")
+
+
+def _setting_label(columns: list[str], values: tuple) -> str:
+    return " / ".join(f"x{value:g}" if column == "noise_scale" else Path(str(value)).name
+                      for column, value in zip(columns, values))
 
 
 def _recovery(folder: Path, sweeps: pd.DataFrame) -> Path:
@@ -233,16 +259,17 @@ def _recovery(folder: Path, sweeps: pd.DataFrame) -> Path:
 
 
 def _plans(folder: Path, rows: pd.DataFrame) -> Path:
-    single = rows[rows["kind"] != "pair"]
-    table = single.pivot_table(index="truth", columns="plan", values="detected", aggfunc="mean")
+    table = plans_table(rows)
+    labels = [_setting_label(["truth", *table.index.names[1:]], key if isinstance(key, tuple) else (key,))
+              for key in table.index]
     figure, axis = plt.subplots(figsize=(max(6.0, 0.8 * len(table) + 2), 4.0), layout="constrained")
     width = 0.8 / max(len(table.columns), 1)
     for index, plan in enumerate(table.columns):
         axis.bar(np.arange(len(table)) + index * width, table[plan].to_numpy(), width, label=Path(plan).name)
-    axis.set_xticks(np.arange(len(table)) + 0.4 - width / 2, table.index, rotation=30, ha="right")
+    axis.set_xticks(np.arange(len(table)) + 0.4 - width / 2, labels, rotation=30, ha="right")
     axis.set_ylim(0, 1.05)
     axis.set_ylabel("share naming the hidden effect")
-    axis.set_xlabel("hidden truth")
+    axis.set_xlabel(" / ".join(LEGEND_TITLES[name] for name in ["truth", *table.index.names[1:]]))
     axis.set_title("Plans side by side: verdicts naming the hidden effect")
     axis.legend(title="plan", fontsize=8)
     return _save(figure, folder / "plans.png")

@@ -44,6 +44,7 @@ from ..config.loading import convert, read_toml
 from ..effects import Effect, load_effect
 from ..errors import ConvergenceError, UserError
 from ..models import MODELS
+from ..plans import Plan, calibration_plan, validation_sweeps
 from ..profile import load_profile
 from ..twin.hidden import inert_effects
 from ..twin.setup_errors import parse_setup_error, setup_error_text
@@ -61,6 +62,9 @@ MAX_CELLS = 100_000
 MAX_NOISE_SCALE = 50.0
 # The rows keep the seed in an int64 column.
 MAX_SEED = 2**63 - 1
+# "short": 12 calibration poses and every jet swept twice (5 steps up, 5 down): the
+# smallest plan whose split still holds out a repetition of each sweep.
+SHORT_POSES, SHORT_STEPS_UP = 12, 5
 
 
 class SizeRange(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
@@ -147,6 +151,13 @@ class Study(msgspec.Struct, frozen=True):
     setups: tuple[tuple[str, tuple[float, ...], tuple[str, ...]], ...] = ()
 
 
+def study_plan(name: str, seed: int) -> Plan:
+    """"short" (see `SHORT_POSES`), or any plan `choose_plan` knows (a built-in or a file)."""
+    if name == "short":
+        return calibration_plan(SHORT_POSES, seed=seed) + validation_sweeps(steps_up=SHORT_STEPS_UP, repetitions=2)
+    return choose_plan(name, seed=seed)
+
+
 def load_study(path: Path) -> Study:
     """The study spec at ``path``, checked (`UserError` naming file and key)."""
     source = str(path)
@@ -169,12 +180,26 @@ def load_study(path: Path) -> Study:
     plans = tuple(_relative(name, folder) for name in spec.plans)
     # Every cell would fail on a profile or plan that does not load: said here, before any runs.
     for key, names, load in (("profiles", profiles, load_profile),
-                             ("plans", plans, lambda name: name == "short" or choose_plan(name))):
+                             ("plans", plans, lambda name: study_plan(name, 0))):
+        files: dict[object, int] = {}
         for index, name in enumerate(names):
             try:
                 loaded = load(name)
             except UserError as error:
                 raise UserError(f"{source}: {key}[{index}]: {error}") from None
+            # A shipped profile's name and its file's path (or two paths to one plan
+            # file) differ as text, but their cells would repeat one another.
+            same = loaded.path.resolve() if key == "profiles" and loaded.path is not None else name
+            if same in files:
+                raise UserError(f"{source}: {key}[{index}] = {getattr(spec, key)[index]!r} is the same file as "
+                                f"{key}[{files[same]}] = {getattr(spec, key)[files[same]]!r} (its cells would repeat "
+                                "that entry's)")
+            files[same] = index
+            if key == "plans" and not (loaded.sweeps >= 0).any():
+                # Every cell would fail in the diagnosis' split, after its simulation.
+                raise UserError(f"{source}: plans[{index}] = {spec.plans[index]!r} has no sweep steps (sweep >= 0), "
+                                "which diagnose holds out: give a plan with validation sweeps (short, paper, or a "
+                                "plan file whose steps include sweeps)")
             hidden = getattr(getattr(loaded, "config", None), "twin", None)
             if hidden is not None and hidden.hidden_effects:
                 # Each cell hides what the spec says: the profile's own would be dropped.
@@ -197,14 +222,20 @@ def load_study(path: Path) -> Study:
             _check_bounds(parameter, size, source, f"{key}.sizes")
         fixed = []
         for name, value in sweep.values.items():
+            if name == parameter.name:
+                # cells.expand would keep one of the two values, replacing some sizes.
+                raise UserError(f"{source}: {key}.values.{name}: {name} is the parameter swept ({key}.parameter); "
+                                "it cannot also be held fixed")
             other = _parameter(effect, name, source, f"{key}.values.{name}")
             _check_bounds(other, value, source, f"{key}.values.{name}")
             fixed.append((f"{effect.name}.{name}", value))
         qualified = f"{effect.name}.{parameter.name}"
         for earlier, (spec_before, name_before, sizes_before, _, _, fixed_before) in enumerate(sweeps):
-            if (spec_before, name_before, fixed_before) == (effect_spec, qualified, tuple(sorted(fixed))) and \
-                    set(sizes_before) & set(sizes):
-                raise UserError(f"{source}: {key} repeats sizes of effects[{earlier}] (the same cells)")
+            # A value written out at its default is the same scenario as one left out.
+            if (spec_before, name_before) == (effect_spec, qualified) and set(sizes_before) & set(sizes) and \
+                    _completed([effect], fixed_before) == _completed([effect], fixed):
+                raise UserError(f"{source}: {key} repeats sizes of effects[{earlier}] (the same cells: the same "
+                                "effect and parameter, the other values the same or at their defaults)")
         sweeps.append((effect_spec, qualified, sizes, parameter.default, parameter.unit, tuple(sorted(fixed))))
         sweep_effects.append(effect)
     pairs, pair_effects = [], []
@@ -223,9 +254,15 @@ def load_study(path: Path) -> Study:
                 raise UserError(f"{source}: {key}.values.{name}: no parameter of {', '.join(e.name for e in effects)}; "
                                 f"known: {', '.join(sorted(known))}")
             _check_bounds(known[name], value, source, f"{key}.values.{name}")
+        for earlier, (specs_before, values_before) in enumerate(pairs):
+            if set(specs_before) == set(specs) and \
+                    _completed(effects, values_before) == _completed(effects, pair.values.items()):
+                raise UserError(f"{source}: {key} repeats pairs[{earlier}] (the same effects at the same values, in "
+                                "another order or with defaults written out: the same scenario)")
         pairs.append((specs, tuple(sorted(pair.values.items()))))
         pair_effects.append(effects)
     setups = []
+    where: dict[tuple, list[tuple[str, set[str]]]] = {}  # (error, size) -> [(its key, its orientations)]
     for index, sweep in enumerate(spec.setup):
         _check_no_repeats([tuple(size) for size in sweep.sizes], source, f"setup[{index}].sizes")
         for number, orientation in enumerate(sweep.orientations):
@@ -237,6 +274,13 @@ def load_study(path: Path) -> Study:
                 parse_setup_error(setup_error_text(sweep.error, tuple(size)))
             except UserError as error:
                 raise UserError(f"{source}: setup[{index}].sizes[{number}]: {error}") from None
+            on = set(sweep.orientations or spec.orientations)
+            for earlier, orientations in where.get((sweep.error, tuple(size)), []):
+                if on & orientations:
+                    raise UserError(f"{source}: setup[{index}].sizes[{number}] repeats {earlier} on the "
+                                    f"{', '.join(sorted(on & orientations))} rod (cells of the same name, one row "
+                                    "hiding the other)")
+            where.setdefault((sweep.error, tuple(size)), []).append((f"setup[{index}].sizes[{number}]", on))
             setups.append((sweep.error, tuple(size), tuple(sweep.orientations)))
     _check_cell_count(spec, sum(len(sweep[2]) for sweep in sweeps) + len(pairs), setups, source)
     _check_each_hides_something(sweeps, sweep_effects, pairs, pair_effects, source)
@@ -264,6 +308,14 @@ def _check_each_hides_something(sweeps: list, sweep_effects: list[Effect], pairs
             raise UserError(f"{source}: pairs[{index}]: at the values given (defaults where none is), "
                             f"{', '.join(inert)} leave(s) the twin's rod as it is and hide(s) nothing; give "
                             f"pairs[{index}].values a size for each effect")
+
+
+def _completed(effects: list[Effect], values) -> tuple[tuple[str, float], ...]:
+    """``values`` ("effect.parameter" -> value) with every other parameter of ``effects``
+    at its default: equal for two spellings of one scenario."""
+    completed = {f"{effect.name}.{parameter.name}": parameter.default
+                 for effect in effects for parameter in effect.parameters}
+    return tuple(sorted({**completed, **dict(values)}.items()))
 
 
 def _inert(effects: list[Effect], values: dict[str, float]) -> tuple[str, ...]:
@@ -300,7 +352,9 @@ def _parameter(effect: Effect, name: str, source: str, key: str):
         if parameter.name == name:
             return parameter
     known = ", ".join(p.name for p in effect.parameters) or "none"
-    raise UserError(f"{source}: {key} = {name!r} is no parameter of {effect.name}; known: {known}")
+    # A key that is the name itself (values.gain_9) is named once, not as its own value.
+    named = f"{key}:" if key.endswith(f".{name}") else f"{key} = {name!r} is"
+    raise UserError(f"{source}: {named} no parameter of {effect.name}; known: {known}")
 
 
 def _check_bounds(parameter, value: float, source: str, key: str) -> None:

@@ -16,7 +16,7 @@ import pyarrow.parquet as pq
 
 from ..errors import UserError
 
-# The ids of the cells of the spec last run into the folder.
+# The spec last run into the folder (its resolved path) and the ids of its cells.
 MEMBERS_FILE = "members.json"
 
 
@@ -29,25 +29,54 @@ class RowStore:
         self.rows_folder = self.folder / "rows"
         self.schema = pa.schema([(name, pa.type_for_alias(kind)) for name, kind in columns.items()])
         self.id_column = id_column
+
+    def create(self) -> None:
+        """Make the folder (nothing is written before: a folder refused stays as it was)."""
         try:
             self.rows_folder.mkdir(parents=True, exist_ok=True)
         except OSError as error:
             raise UserError(f"{self.folder}: cannot create the result folder: {error.strerror or error}") from None
 
-    def remember(self, ids: Collection[str]) -> None:
-        """Keep ``ids`` as the folder's members: what a later `members` (a report rebuilt
-        without the spec) takes as its rows."""
-        (self.folder / MEMBERS_FILE).write_text(json.dumps(sorted(ids)))
+    def claim(self, spec: str, ids: Collection[str]) -> None:
+        """Make the folder the results of ``spec`` (an identity: its resolved path) with
+        cells ``ids``, kept as the folder's members: what a later `members` (a report
+        rebuilt without the spec) takes as its rows. Refused, before anything is written,
+        for a folder of another kind's rows, or of another spec's study (its members and
+        report would be replaced, its rows then called left out): one whose cells neither
+        include nor are included in ``ids``, as a copy's or a narrowed or widened spec's are."""
+        self.check_kind()
+        recorded = self._recorded()
+        if recorded is not None and recorded[0] not in (None, spec) and \
+                not (recorded[1] <= set(ids) or set(ids) <= recorded[1]):
+            raise UserError(f"{self.folder}: holds the study of {recorded[0]} ({len(recorded[1])} cells), not of "
+                            f"{spec}; give another folder, or run that spec into it")
+        self.create()
+        (self.folder / MEMBERS_FILE).write_text(json.dumps({"spec": spec, "cells": sorted(ids)}))
 
     def members(self) -> set[str] | None:
-        """The ids the last `remember` kept (None when it never ran here)."""
+        """The ids the last `claim` kept (None when it never ran here)."""
+        recorded = self._recorded()
+        return None if recorded is None else recorded[1]
+
+    def _recorded(self) -> tuple[str | None, set[str]] | None:
+        """(spec, cell ids) of the last `claim`; the spec is None in a folder written
+        before members named it."""
         path = self.folder / MEMBERS_FILE
         try:
-            return set(json.loads(path.read_text()))
+            document = json.loads(path.read_text())
+            if isinstance(document, list):
+                return None, set(document)
+            return str(document["spec"]), set(document["cells"])
         except FileNotFoundError:
             return None
-        except (OSError, ValueError, TypeError) as error:
+        except (OSError, ValueError, TypeError, KeyError) as error:
             raise UserError(f"{path}: unreadable ({error}); remove it to report every stored row") from None
+
+    def check_kind(self) -> None:
+        """Refuse a folder holding rows of another kind (`_read`'s words), from one of them."""
+        first = next(iter(sorted(self.rows_folder.glob("*.parquet"))), None)
+        if first is not None:
+            self._read(first)
 
     def stored(self) -> set[str]:
         """Ids of the rows stored, failed ones included."""
@@ -60,6 +89,8 @@ class RowStore:
 
     def append(self, row: Mapping[str, object]) -> Path:
         """Store one row at once (atomically: a temporary file renamed into place)."""
+        if not self.rows_folder.is_dir():
+            self.create()
         path = self.rows_folder / f"{row[self.id_column]}.parquet"
         temporary = path.with_suffix(".tmp")
         pq.write_table(pa.Table.from_pylist([dict(row)], schema=self.schema), temporary)
@@ -79,6 +110,9 @@ class RowStore:
             table = pq.read_table(part)
             if table.schema.names == self.schema.names:
                 return table.cast(self.schema)
+            if self.id_column in table.schema.names and set(table.schema.names) < set(self.schema.names):
+                # A row stored before its kind gained columns: kept, the new figures empty.
+                return pa.Table.from_pylist(table.to_pylist(), schema=self.schema)
         except (pa.ArrowException, OSError) as error:
             raise UserError(f"{part}: not a readable row ({error}); remove it, or give another folder") from None
         raise UserError(f"{part}: a row of another kind (columns {', '.join(table.schema.names[:3])}, ...): this "

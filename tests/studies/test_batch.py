@@ -50,6 +50,9 @@ def test_batch_diagnose_gives_one_row_per_log(logs: list[Path], tmp_path: Path):
     assert rows[0]["error"] is None and rows[1]["error"] is None
     assert "broken.csv" in rows[2]["error"] and "Traceback" not in rows[2]["error"]
     assert rows[1]["baseline_heldout_rmse_deg"] > 5 * rows[1]["noise_floor_deg"]
+    # What a study's row says of the verdict's fits, a batch's says too.
+    assert [(row["converged"], row["bound_clipped"], row["unconverged_fits"]) for row in rows[:2]] == \
+        [(True, False, 0), (True, False, 0)]
     assert len(list((out / "rows").glob("*.parquet"))) == 3
     assert "weak_jet.csv" in result.stderr  # the table goes to stderr when JSON takes stdout
 
@@ -88,6 +91,8 @@ def test_batch_replay_reproduces_the_live_estimates_and_says_which_log_was_cut(l
     assert result.returncode == 0, result.stderr
     replayed, truncated = json.loads(result.stdout)
     assert replayed["error"] is None and replayed["steps"] == 4 and replayed["model"] == "cosserat"
+    # The plan's one sweep (two steps) scored, none left out, as replay counts them.
+    assert (replayed["scored_steps"], replayed["skipped_steps"]) == (2, 0)
     assert replayed["live_difference_deg"] == 0.0 and 0.0 < replayed["validation_orientation_rmse_deg"] < 10.0
     assert replayed["log_damage"] is None and not replayed["truncated"]
     assert truncated["truncated"] and truncated["log_damage"].startswith(f"{cut}: it is truncated")
@@ -102,3 +107,42 @@ def test_batch_replay_reproduces_the_live_estimates_and_says_which_log_was_cut(l
 def test_batch_of_a_missing_log_is_one_line(tmp_path: Path):
     result = batch("diagnose", str(tmp_path / "nowhere.csv"))
     assert result.returncode == 2 and "nowhere.csv: no such log" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_batch_exits_as_the_single_commands_do():
+    from hydrojet_bench.commands.batch import exit_code
+
+    diagnosed = {"log": "a.csv", "error": None, "verdict": "none"}
+    assert exit_code([diagnosed]) == 0
+    # diagnose exits 3 on an undecided verdict; replay 1 on errors that are not finite.
+    assert exit_code([diagnosed, {**diagnosed, "verdict": "undecided"}]) == 3
+    replayed = {"log": "a.mcap", "error": None, "validation_orientation_rmse_deg": 0.2}
+    assert exit_code([replayed]) == 0
+    assert exit_code([replayed, {**replayed, "validation_orientation_rmse_deg": None}]) == 1
+    assert exit_code([replayed, {**replayed, "validation_orientation_rmse_deg": float("inf")}]) == 1
+    # A failed log outranks an undecided one.
+    assert exit_code([{**diagnosed, "verdict": "undecided"}, {**diagnosed, "verdict": None, "error": "x"}]) == 1
+
+
+def test_a_bad_profile_is_refused_before_the_cluster_starts(logs: list[Path]):
+    result = batch("diagnose", str(logs[0]), "--profile", "nope")
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr.count("\n") == 1 and result.stderr.startswith("error: --profile nope: rig profile 'nope'")
+
+
+def test_rows_stored_before_a_kind_gained_columns_are_kept(tmp_path: Path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from hydrojet_bench.studies.batch import DIAGNOSE_COLUMNS, LogTask, log_row
+    from hydrojet_bench.studies.store import RowStore
+
+    store = RowStore(tmp_path, DIAGNOSE_COLUMNS, "log_id")
+    store.rows_folder.mkdir(parents=True, exist_ok=True)
+    old = {name: kind for name, kind in DIAGNOSE_COLUMNS.items() if name not in ("converged", "bound_clipped")}
+    row = {**log_row(LogTask("/x.csv"), old), "verdict": "none"}
+    pq.write_table(pa.Table.from_pylist([row], schema=pa.schema([(n, pa.type_for_alias(k)) for n, k in old.items()])),
+                   store.rows_folder / f"{row['log_id']}.parquet")
+    table = store.table()
+    assert list(table.columns) == list(DIAGNOSE_COLUMNS) and table["verdict"].tolist() == ["none"]
+    assert table["converged"].isna().all()

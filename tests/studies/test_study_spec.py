@@ -8,6 +8,7 @@ import pytest
 from study_helpers import TINY, WITH_BOOM, run_study, write_spec
 
 from hydrojet_bench.errors import UserError
+from hydrojet_bench.profile import PROFILES_DIR
 from hydrojet_bench.studies.cells import expand
 from hydrojet_bench.studies.spec import load_study
 
@@ -28,6 +29,8 @@ from hydrojet_bench.studies.spec import load_study
     # Every cell would fail on these: refused before any runs.
     ('plans = ["nope"]\n', "plans[0]: plan 'nope': neither a built-in plan"),
     ('profiles = ["nope"]\n', "profiles[0]: rig profile 'nope' not found"),
+    ('plans = ["short", "calibration:12"]\n',
+     "plans[1] = 'calibration:12' has no sweep steps (sweep >= 0), which diagnose holds out: give a plan with"),
     ('orientations = ["upside-down"]\n', "orientations[0] must be one of 'hanging', 'horizontal', got 'upside-down'"),
     ('seeds = "zero"\n', "seeds must be a list of integers with at least 1 entry, got 'zero'"),
     ('seeds = ["zero"]\n', "seeds[0] must be an integer, got 'zero'"),
@@ -63,13 +66,38 @@ from hydrojet_bench.studies.spec import load_study
      "pairs[0].effects[1] = 'jet_gain' repeats pairs[0].effects[0]"),
     ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.8]\n'
      '[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.8, 0.9]\n',
-     "effects[1] repeats sizes of effects[0] (the same cells)"),
+     "effects[1] repeats sizes of effects[0] (the same cells"),
+    # The same scenarios spelled twice: refused as the repeats they are, naming both.
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.7]\n'
+     '[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.7]\nvalues = {gain_2 = 1.0}\n',
+     "effects[1] repeats sizes of effects[0] (the same cells"),
+    ('[[pairs]]\neffects = ["jet_gain", "base_compliance"]\n'
+     'values = {"jet_gain.gain_1" = 0.8, "base_compliance.compliance_rad_per_nm" = 20.0}\n'
+     '[[pairs]]\neffects = ["base_compliance", "jet_gain"]\n'
+     'values = {"jet_gain.gain_1" = 0.8, "base_compliance.compliance_rad_per_nm" = 20.0, "jet_gain.gain_2" = 1.0}\n',
+     "pairs[1] repeats pairs[0] (the same effects at the same values"),
+    ('[[setup]]\nerror = "tracker_tilt_deg"\nsizes = [[2.0, 1.0]]\n'
+     '[[setup]]\nerror = "tracker_tilt_deg"\nsizes = [[6.0, 0.0], [2.0, 1.0]]\n',
+     "setup[1].sizes[1] repeats setup[0].sizes[0] on the hanging rod"),
+    ('profiles = ["sim", "SHIPPED/sim.toml"]\n',
+     "profiles[1] = 'SHIPPED/sim.toml' is the same file as profiles[0] = 'sim'"),
+    # Held fixed and swept at once, the fixed value would replace some of the sizes.
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.7, 0.9]\nvalues = {gain_1 = 0.8}\n',
+     "effects[0].values.gain_1: gain_1 is the parameter swept (effects[0].parameter); it cannot also be held fixed"),
+    # A key naming the parameter is said once; TOML's [table] for [[table]] is named.
+    ('[[effects]]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.9]\nvalues = {gain_9 = 1.0}\n',
+     "effects[0].values.gain_9: no parameter of jet_gain; known: gain_1"),
+    ('[effects]\neffect = "jet_gain"\nparameter = "gain_1"\nsizes = [0.9]\n',
+     "effects must be a list of tables, got a table (write each as a [[effects]] block)"),
+    ('[[setup]]\nerror = "jet_wiring"\nsizes = 1\n',
+     "setup[0].sizes must be a list of lists of numbers with at least 1 entry, got 1"),
     ('profiles = ["sim-mystery"]\n', "profiles[0] = 'sim-mystery' hides pressure_stiffening in its [twin] table"),
     ('none = false\n[[setup]]\nerror = "tracker_tilt_deg"\nsizes = [[1e308, 0.0]]\n',
      "setup[0].sizes[0]: setup error 'tracker_tilt_deg=1e+308,0': SetupErrors.tracker_tilt_deg must be angles "
      "from -45 to 45 degrees"),
 ])
 def test_spec_mistakes_name_file_and_key(tmp_path: Path, body: str, message: str):
+    body, message = (text.replace("SHIPPED", str(PROFILES_DIR)) for text in (body, message))
     spec = write_spec(tmp_path, body, "bad.toml")
     with pytest.raises(UserError) as caught:
         load_study(spec)
@@ -178,3 +206,43 @@ def test_a_bad_scheduler_a_row_table_onto_a_folder_and_foreign_rows_are_one_line
     (out / "rows" / "junk.parquet").write_text("not parquet")
     assert main(["study", "--report-only", str(out)]) == 2
     assert "not a readable row" in capsys.readouterr().err
+    # A spec beside --report-only would be ignored: refused instead.
+    assert main(["study", str(spec), "--report-only", str(out)]) == 2
+    assert "runs no spec; give" in " ".join(capsys.readouterr().err.split())
+
+
+def test_a_folder_of_another_kind_or_another_specs_study_is_refused_before_anything_is_written(tmp_path: Path,
+                                                                                               capsys):
+    from hydrojet_bench.cli import main
+    from hydrojet_bench.studies.batch import DIAGNOSE_COLUMNS, LogTask, log_row
+    from hydrojet_bench.studies.cell import ROW_COLUMNS
+    from hydrojet_bench.studies.store import MEMBERS_FILE, RowStore
+
+    spec = write_spec(tmp_path, TINY)
+    batch = tmp_path / "batch"
+    RowStore(batch, DIAGNOSE_COLUMNS, "log_id").append(log_row(LogTask("/x.csv"), DIAGNOSE_COLUMNS, "failed"))
+    assert main(["study", str(spec), "-o", str(batch)]) == 2
+    assert "a row of another kind" in capsys.readouterr().err and not (batch / MEMBERS_FILE).exists()
+    # Another spec's study: its members (and so its report) would be replaced.
+    other = tmp_path / "other"
+    RowStore(other, ROW_COLUMNS, "cell_id").claim("/studies/library.toml", {"a", "b"})
+    before = (other / MEMBERS_FILE).read_text()
+    assert main(["study", str(spec), "-o", str(other)]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert f"{other}: holds the study of /studies/library.toml (2 cells), not of {spec}" in err
+    assert (other / MEMBERS_FILE).read_text() == before and not (other / "report").exists()
+    # The same cells, more or fewer, from another file (a copy, a narrowed spec), its own
+    # spec edited, and a folder from before members named the spec: the same study.
+    store = RowStore(other, ROW_COLUMNS, "cell_id")
+    store.claim(str(spec), {"a", "b"})
+    store.claim("/elsewhere/copy.toml", {"a", "b"})
+    store.claim("/elsewhere/copy.toml", {"a", "b", "c"})
+    store.claim("/elsewhere/narrow.toml", {"a"})
+    with pytest.raises(UserError, match="holds the study of /elsewhere/narrow.toml"):
+        store.claim("/elsewhere/another.toml", {"b"})
+    (other / MEMBERS_FILE).write_text('["a"]')
+    store.claim(str(spec), {"d"})
+    assert store.members() == {"d"}
+    fresh = tmp_path / "fresh"
+    RowStore(fresh, ROW_COLUMNS, "cell_id")
+    assert not fresh.exists()
