@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -158,19 +159,25 @@ def test_damage_in_a_cut_log_is_counted_from_the_message_index(tmp_path: Path) -
     assert len(contents.messages) <= 2 * quarter
 
 
-def test_one_unreadable_message_among_good_ones_is_skipped_and_counted(tmp_path: Path) -> None:
-    path = tmp_path / "odd.mcap"
-    good = json.loads(msgspec.json.encode(EXAMPLES["/events"]))
+@contextlib.contextmanager
+def hand_made_events(path: Path):
+    """An MCAP writer of hand-made /events messages: (writer, channel id, an event as JSON)."""
     with path.open("wb") as handle:
         writer = Writer(handle)
         writer.start()
         schema = writer.register_schema("hydrojet_bench.Event", "jsonschema", b"{}")
-        events = writer.register_channel("/events", "json", schema)
+        yield writer, writer.register_channel("/events", "json", schema), json.loads(
+            msgspec.json.encode(EXAMPLES["/events"]))
+        writer.finish()
+
+
+def test_one_unreadable_message_among_good_ones_is_skipped_and_counted(tmp_path: Path) -> None:
+    path = tmp_path / "odd.mcap"
+    with hand_made_events(path) as (writer, events, good):
         for index in range(5):
             message = {**good, "t_s": float(index)} if index != 2 else {"t_s": 2.0, "level": 3}
             writer.add_message(events, log_time=index * 10**9, publish_time=index * 10**9,
                                data=json.dumps(message).encode())
-        writer.finish()
     contents = read_log(path)
     assert [m.t_s for m in contents.messages] == [0.0, 1.0, 3.0, 4.0]
     assert contents.damage is not None and contents.damage.undecodable_messages == 1
@@ -241,12 +248,7 @@ def test_two_logs_concatenated_are_refused_with_where_the_second_begins(tmp_path
 
 def test_a_record_written_twice_is_read_once_and_counted(tmp_path: Path) -> None:
     path = tmp_path / "doubled.mcap"
-    event = json.loads(msgspec.json.encode(EXAMPLES["/events"]))
-    with path.open("wb") as handle:
-        writer = Writer(handle)
-        writer.start()
-        schema = writer.register_schema("hydrojet_bench.Event", "jsonschema", b"{}")
-        events = writer.register_channel("/events", "json", schema)
+    with hand_made_events(path) as (writer, events, event):
         for index, copies in enumerate((1, 2, 1, 3)):
             data = json.dumps({**event, "t_s": float(index)}).encode()
             for _ in range(copies):
@@ -255,7 +257,6 @@ def test_a_record_written_twice_is_read_once_and_counted(tmp_path: Path) -> None
         # The same message under its own sequence number: the bench wrote it twice (a
         # held clock), so it is kept.
         writer.add_message(events, log_time=3 * 10**9, publish_time=3 * 10**9, data=data, sequence=4)
-        writer.finish()
     contents = read_log(path)
     assert [m.t_s for m in contents.messages] == [0.0, 1.0, 2.0, 3.0, 3.0]
     damage = contents.damage
