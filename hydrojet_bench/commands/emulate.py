@@ -1,26 +1,36 @@
-"""`hydrojet-bench emulate aurora|valves`: serve a device emulator on a pseudo-terminal.
+"""`hydrojet-bench emulate aurora|valves [aurora|valves]`: serve device emulators on
+pseudo-terminals.
 
-Prints the pty path and runs until Ctrl-C, so that any other program (a script, a
-vendor tool, a real client library) can be pointed at it. The emulator's truth is the
-digital twin of a sim profile (``--profile``, default ``sim``: its rod, clamp pose,
-sensor mountings and hidden effects), at rest until the valve emulator opens a jet; or,
-with ``--static``, a plant whose base sits at the origin and tip 70 mm below it.
+Prints each pty path and runs until Ctrl-C, so that any other program (a script, a
+vendor tool, a real client library, `run` with a profile naming the ptys) can be pointed
+at it. The emulators' truth is the digital twin of a sim profile (``--profile``, default
+``sim``: its rod, clamp pose, sensor mountings and hidden effects), at rest until the
+valve emulator opens a jet; or, with ``--static``, a plant whose base sits at the origin
+and tip 70 mm below it. Both devices in one command share one twin, so the tracker sees
+the tip move when the valves open: two separate commands each have their own.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
+import threading
 import time
+from collections.abc import Callable
 
 from drivers.valve.protocol import DEFAULT_WATCHDOG_MS
 
 from ..errors import UserError
 from . import render
 
+DEVICES = ("aurora", "valves")
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("emulate", help="serve a device emulator on a pty until Ctrl-C")
-    parser.add_argument("device", choices=("aurora", "valves"), help="which device to emulate")
+    parser = subparsers.add_parser("emulate", help="serve device emulators on ptys until Ctrl-C")
+    parser.add_argument("device", nargs="+", choices=DEVICES,
+                        help="which device(s) to emulate; 'aurora valves' serves both from one twin, so the "
+                             "tracker sees the tip move when the valves open")
     parser.add_argument("--watchdog-ms", type=float,
                         help=f"valves: firmware watchdog period in ms, 1..65535 (default {DEFAULT_WATCHDOG_MS})")
     parser.add_argument("--profile", default="sim",
@@ -37,24 +47,66 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     console = render.console(stderr=True)
-    if args.device != "valves" and args.watchdog_ms is not None:
-        raise UserError(f"--watchdog-ms is the valve controller's; the {args.device} emulator has none")
+    devices = tuple(dict.fromkeys(args.device))
+    if len(devices) < len(args.device):
+        raise UserError(f"emulate: a device given twice ({' '.join(args.device)}); each is served once")
+    if "valves" not in devices and args.watchdog_ms is not None:
+        raise UserError(f"--watchdog-ms is the valve controller's; the {devices[0]} emulator has none")
+    servers: list[Callable[[threading.Event], object]] = []
     plant = _plant(args)
-    if args.device == "valves":
+    printing = threading.Lock()
+
+    def announce(line: str) -> None:
+        with printing:  # two servers announce from two threads: one whole line each
+            sys.stdout.write(f"{line}\n")
+            sys.stdout.flush()
+
+    if "valves" in devices:
         watchdog_ms = DEFAULT_WATCHDOG_MS if args.watchdog_ms is None else args.watchdog_ms
         # The firmware holds the period in whole milliseconds, 16 bits.
         if not 1 <= watchdog_ms <= 0xFFFF:
             raise UserError(f"--watchdog-ms must be 1..65535 (the firmware's whole milliseconds), got {watchdog_ms:g}")
         from drivers.valve.serve import serve
 
-        serve(_ReportingPlant(plant), round(watchdog_ms) / 1000.0,
-              announce=lambda path: print(f"valve controller emulator on {path}", flush=True))
-    else:
+        servers.append(lambda stop: serve(_ReportingPlant(plant), round(watchdog_ms) / 1000.0, stop=stop,
+                                          announce=lambda path: announce(f"valve controller emulator on {path}")))
+    if "aurora" in devices:
         from drivers.aurora.serve import serve_pty
 
-        serve_pty(plant, announce=lambda line: print(line, flush=True))
-    console.print("emulator stopped")
+        servers.append(lambda stop: serve_pty(plant, announce=announce, stop=stop))
+    _serve_together(servers)
+    console.print("emulator stopped" if len(servers) == 1 else "emulators stopped")
     return 0
+
+
+def _serve_together(servers: list[Callable[[threading.Event], object]]) -> None:
+    """Run each server (it serves until the event is set, or Ctrl-C in the main thread),
+    the last in this thread, where Ctrl-C arrives, the others in threads; when one ends
+    (Ctrl-C, or its emulator died) all stop, the valves closing as their server ends. An
+    emulator's error is raised here, after every server stopped."""
+    stop = threading.Event()
+    errors: list[BaseException] = []
+
+    def in_background(server: Callable[[threading.Event], object]) -> None:
+        try:
+            server(stop)
+        except BaseException as error:  # noqa: BLE001 - re-raised in the main thread
+            errors.append(error)
+        finally:
+            stop.set()
+
+    threads = [threading.Thread(target=in_background, args=(server,), name="emulator", daemon=True)
+               for server in servers[:-1]]
+    for thread in threads:
+        thread.start()
+    try:
+        servers[-1](stop)
+    finally:
+        stop.set()
+        for thread in threads:
+            thread.join()
+    if errors:
+        raise errors[0]
 
 
 def _plant(args: argparse.Namespace):
