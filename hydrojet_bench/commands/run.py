@@ -27,6 +27,7 @@ from rich.console import Console
 
 from ..config.schema import MAX_TIME_SCALE, MIN_TIME_SCALE
 from ..errors import UserError
+from ..estimation.calibration import determinable
 from ..files import check_writable_target, create_numbered, make_folder_for
 from ..model_choice import ModelDefaults, model_choice
 from ..plans import clipped_warning, short_steps_warning
@@ -166,7 +167,7 @@ def _run(args: argparse.Namespace, server: FoxgloveLive | None) -> int:
         progress.print(f"[yellow]stopped by {result.name}:[/] valves closed, log finished: {render.plain(log_path)}")
         _say_no_report(progress, args, log_path)
         return 128 + result
-    _print_outcome(console, progress, result, model.name, args)
+    _print_outcome(console, progress, result, model.name, len(choice.calibration_names), args)
     return 0 if _calibration_trusted(result) else UNTRUSTED
 
 
@@ -344,7 +345,8 @@ def _timing(result) -> str:
             "set-up (devices, kernels)")
 
 
-def _print_outcome(console: Console, warnings: Console, result, model_name: str, args: argparse.Namespace) -> None:
+def _print_outcome(console: Console, warnings: Console, result, model_name: str, calibrated_parameters: int,
+                   args: argparse.Namespace) -> None:
     """The session's report on ``console`` (standard output); its warnings on
     ``warnings`` (standard error, as the command's help says), so that a report sent to a
     file does not hide them."""
@@ -394,9 +396,11 @@ def _print_outcome(console: Console, warnings: Console, result, model_name: str,
                            "sweeps' Table II and figures, and this session has no sweep steps")
     log = result.log_path
     console.print("\nnext:")
-    # Only what runs on this log: calibrate needs calibration poses, diagnose sweeps too;
-    # poses the session's own calibration failed on fail `calibrate` the same way.
-    poses = steps is not None and bool((steps.sweep == -1).any()) and result.calibration_failure is None
+    # Only what runs on this log: calibrate needs enough calibration poses (also when the
+    # session did not calibrate: --no-calibration), diagnose sweeps too; poses the
+    # session's own calibration failed on fail `calibrate` the same way.
+    poses = (steps is not None and result.calibration_failure is None
+             and determinable(int((steps.sweep == -1).sum()), calibrated_parameters, steps.tip_position_m is not None))
     diagnosable = steps is not None and _diagnosable(steps)
     for line in (f"{command('replay', log, '--online')}  # re-run the estimation offline",
                  *([f"{command('calibrate', log, '-o', 'p.toml')}  # calibrate on the logged poses",

@@ -164,6 +164,12 @@ class TooFewPoses(ValueError):
     """Fewer residuals than parameters: the fit is not even attempted."""
 
 
+def determinable(poses: int, parameters: int, with_positions: bool) -> bool:
+    """Whether ``poses`` give more residuals (3 orientation rows each, 3 more with tip
+    positions) than ``parameters``: the least a fit must have to be attempted."""
+    return poses * (6 if with_positions else 3) > parameters
+
+
 def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: ModelParameters,
               names: Sequence[str] = DEFAULT_NAMES, *,
               position_weight_rad_per_m: float = DEFAULT_POSITION_WEIGHT_RAD_PER_M,
@@ -200,7 +206,7 @@ def calibrate(model: ShootingModel, poses: Sequence[CalibrationPose], initial: M
     use_positions = position_weight_rad_per_m > 0 and all(
         poses[index].tip_position_in_base_sensor_m is not None for index in fitted_indices)
     rows_per_pose = 6 if use_positions else 3
-    if len(fitted_indices) * rows_per_pose <= len(names):
+    if not determinable(len(fitted_indices), len(names), use_positions):
         raise TooFewPoses(f"{len(fitted_indices)} pose{'' if len(fitted_indices) == 1 else 's'} cannot determine "
                           f"{len(names)} parameters")
     bounds = np.array([parameter_bounds(model, name) for name in names]).T

@@ -287,3 +287,10 @@ def test_a_failed_session_calibration_is_said_and_is_no_clean_exit(tmp_path, cap
             "session predicted and estimated with its starting parameters") in " ".join(err.split())
     assert "RMS errors" in out  # Table II of the sweep steps all the same
     assert f"replay {log} --online" in out and "calibrate" not in out and "--params p.toml" not in out
+    # Without the session's own calibration, "next" still counts whether the poses can
+    # determine a calibration before it offers one.
+    uncalibrated = tmp_path / "no-fit.mcap"
+    assert main(["run", "--plan", str(plan), "--no-live", "--skip-checks", "--time-scale", "20", "--no-calibration",
+                 "--log", str(uncalibrated)]) == 0
+    out, _ = capsys.readouterr()
+    assert f"replay {uncalibrated} --online" in out and "hydrojet-bench calibrate" not in out
