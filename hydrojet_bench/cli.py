@@ -13,7 +13,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 
 from rich.console import Console
@@ -61,6 +63,17 @@ def _all_subparsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentPa
     return found
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (kill, a scheduler's time limit) in a command that sets the default
+    ``stops_on_sigterm`` (`study`, `batch`; `run` handles its own stop signals around the
+    valves), raised where Ctrl-C would be, so that the same clean-up runs: a study's
+    cluster closes, the rows stored so far stay."""
+
+
+def _raise_terminated(number: int, frame: object) -> None:
+    raise Terminated
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         # Ctrl-C while the command's modules load (numba's take seconds) is no bug either.
@@ -72,6 +85,8 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    on_sigterm = getattr(args, "stops_on_sigterm", False) and threading.current_thread() is threading.main_thread()
+    previous_sigterm = signal.signal(signal.SIGTERM, _raise_terminated) if on_sigterm else None
     try:
         json_path = getattr(args, "json", None)
         if isinstance(json_path, Path) and str(json_path) != render.STDOUT:
@@ -88,6 +103,9 @@ def main(argv: list[str] | None = None) -> int:
         # jet force): the user's inputs, not a bug, so one line naming them.
         _print_error(f"{error}; check the parameters and forces in {_input_files(args)}")
         return 2
+    except Terminated:
+        Console(stderr=True).print("terminated (SIGTERM)")
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         Console(stderr=True).print("interrupted")
         return 130
@@ -96,6 +114,9 @@ def main(argv: list[str] | None = None) -> int:
         # /dev/null so that flushing it at exit does not fail again.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+    finally:
+        if previous_sigterm is not None:
+            signal.signal(signal.SIGTERM, previous_sigterm)
 
 
 def _input_files(args: argparse.Namespace) -> str:

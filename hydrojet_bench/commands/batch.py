@@ -59,8 +59,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         sub.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask cluster (tcp://host:8786)")
         sub.add_argument("--workers", type=int, default=2, help="local worker processes (default: 2)")
         render.add_json_argument(sub, "the rows")
-        render.add_exit_codes(sub, EXIT_CODES[action])
-        sub.set_defaults(func=run)
+        render.add_exit_codes(sub, {**EXIT_CODES[action],
+                                    143: "stopped by SIGTERM (the rows stored so far are kept: run again to resume)"})
+        sub.set_defaults(func=run, stops_on_sigterm=True)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -28,8 +28,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--csv", action="store_true", help="also write DIR/rows.csv")
     parser.add_argument("--report-only", type=Path, metavar="DIR", help="rebuild DIR/report/ from stored rows")
     render.add_json_argument(parser, "the outcome, the files written and every row")
-    render.add_exit_codes(parser, {1: "some cell failed (its row names the error; the others are reported)"})
-    parser.set_defaults(func=run)
+    render.add_exit_codes(parser, {1: "some cell failed (its row names the error; the others are reported)",
+                                   143: "stopped by SIGTERM (the rows stored so far are kept: run again to resume)"})
+    parser.set_defaults(func=run, stops_on_sigterm=True)
 
 
 def run(args: argparse.Namespace) -> int:

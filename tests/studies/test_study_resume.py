@@ -65,3 +65,28 @@ def test_ctrl_c_stops_a_study_with_one_line(tmp_path: Path):
     assert process.returncode == 130, err
     assert "Traceback" not in err and "WARNING" not in err, err
     assert err.rstrip().endswith("interrupted")
+
+
+def test_sigterm_stops_a_study_with_one_line_and_keeps_its_rows(tmp_path: Path):
+    """A scheduler's time limit or `kill` sends SIGTERM to the study alone: it stops as
+    on Ctrl-C, closing its cluster, and says so (it ended with no word, exit 143)."""
+    spec = write_spec(tmp_path, TINY)
+    out = tmp_path / "out"
+    process = subprocess.Popen(study_command(str(spec), "-o", str(out), "--workers", "1"), stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + FIRST_ROW_TIMEOUT_S
+        while not list((out / "rows").glob("*.parquet")):
+            assert process.poll() is None, "the study ended before it stored a row"
+            assert time.monotonic() < deadline, "no row stored in time"
+            time.sleep(0.1)
+        process.send_signal(signal.SIGTERM)
+        _, err = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait(timeout=30)
+    assert process.returncode == 143, err
+    assert "Traceback" not in err, err
+    assert err.rstrip().endswith("terminated (SIGTERM)")
+    assert list((out / "rows").glob("*.parquet"))
