@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from study_helpers import TINY, run_study, stored_rows, study_command, write_spec
@@ -43,12 +44,13 @@ def test_a_killed_study_resumes_where_it_stopped(tmp_path: Path):
     assert "0 cells run (4 already done)" in " ".join(again.stdout.split())
 
 
-def test_ctrl_c_stops_a_study_with_one_line(tmp_path: Path):
-    """Ctrl-C at a terminal reaches the whole process group, Dask's worker processes
-    too: each printed its own traceback and warnings before the study stopped."""
+def stopped_after_its_first_row(tmp_path: Path, stop: Callable[[subprocess.Popen], None],
+                                 workers: str) -> tuple[int, str, Path]:
+    """Start a study of four cells, ``stop`` it once it stored a row; its exit code,
+    standard error and result folder."""
     spec = write_spec(tmp_path, TINY)
     out = tmp_path / "out"
-    process = subprocess.Popen(study_command(str(spec), "-o", str(out), "--workers", "2"), stdout=subprocess.PIPE,
+    process = subprocess.Popen(study_command(str(spec), "-o", str(out), "--workers", workers), stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         deadline = time.monotonic() + FIRST_ROW_TIMEOUT_S
@@ -56,13 +58,20 @@ def test_ctrl_c_stops_a_study_with_one_line(tmp_path: Path):
             assert process.poll() is None, "the study ended before it stored a row"
             assert time.monotonic() < deadline, "no row stored in time"
             time.sleep(0.1)
-        os.killpg(process.pid, signal.SIGINT)
+        stop(process)
         _, err = process.communicate(timeout=60)
     finally:
         if process.poll() is None:
             os.killpg(process.pid, signal.SIGKILL)
             process.wait(timeout=30)
-    assert process.returncode == 130, err
+    return process.returncode, err, out
+
+
+def test_ctrl_c_stops_a_study_with_one_line(tmp_path: Path):
+    """Ctrl-C at a terminal reaches the whole process group, Dask's worker processes
+    too: each printed its own traceback and warnings before the study stopped."""
+    code, err, _ = stopped_after_its_first_row(tmp_path, lambda process: os.killpg(process.pid, signal.SIGINT), "2")
+    assert code == 130, err
     assert "Traceback" not in err and "WARNING" not in err, err
     assert err.rstrip().endswith("interrupted")
 
@@ -70,23 +79,8 @@ def test_ctrl_c_stops_a_study_with_one_line(tmp_path: Path):
 def test_sigterm_stops_a_study_with_one_line_and_keeps_its_rows(tmp_path: Path):
     """A scheduler's time limit or `kill` sends SIGTERM to the study alone: it stops as
     on Ctrl-C, closing its cluster, and says so (it ended with no word, exit 143)."""
-    spec = write_spec(tmp_path, TINY)
-    out = tmp_path / "out"
-    process = subprocess.Popen(study_command(str(spec), "-o", str(out), "--workers", "1"), stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True, start_new_session=True)
-    try:
-        deadline = time.monotonic() + FIRST_ROW_TIMEOUT_S
-        while not list((out / "rows").glob("*.parquet")):
-            assert process.poll() is None, "the study ended before it stored a row"
-            assert time.monotonic() < deadline, "no row stored in time"
-            time.sleep(0.1)
-        process.send_signal(signal.SIGTERM)
-        _, err = process.communicate(timeout=60)
-    finally:
-        if process.poll() is None:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait(timeout=30)
-    assert process.returncode == 143, err
+    code, err, out = stopped_after_its_first_row(tmp_path, lambda process: process.send_signal(signal.SIGTERM), "1")
+    assert code == 143, err
     assert "Traceback" not in err, err
     assert err.rstrip().endswith("terminated (SIGTERM)")
     assert list((out / "rows").glob("*.parquet"))
