@@ -129,8 +129,10 @@ class SensorPoses(NamedTuple):
 
 
 # The profile tables the models and the sensor frames are made of (not the devices', the
-# session's or the twin's).
+# session's or the twin's), less what no prediction reads: where the clamp stands in the
+# tracker's field (predictions are in the base sensor's frame) and the valves' force limit.
 PHYSICS_TABLES = ("gravity", "base", "base_sensor", "tip_sensor", "rod", "capsule", "jets")
+NOT_PREDICTED = frozenset({"base.position_in_tracker_m", "jets.max_force_n"})
 
 @dataclass(frozen=True)
 class RigProfile:
@@ -205,7 +207,7 @@ class RigProfile:
         flat: dict[str, float | bool | list] = {}
         for table in PHYSICS_TABLES:
             for key, value in msgspec.to_builtins(getattr(self.config, table)).items():
-                if value is not None:
+                if value is not None and f"{table}.{key}" not in NOT_PREDICTED:
                     flat[f"{table}.{key}"] = list(value) if isinstance(value, tuple) else value
         return flat
 
