@@ -161,7 +161,8 @@ def test_what_the_parameters_did_not_calibrate_is_said(calibrated, capsys, tmp_p
     assert parameters["uncalibrated"] == []
     # What no prediction reads (the valves' limit, where the clamp stands in the field) is no other rig.
     moved = tmp_path / "moved.toml"
-    moved.write_text('extends = "thick.toml"\n[jets]\nmax_force_n = 0.3\n[base]\nposition_in_tracker_m = [0.1, 0, 0.2]\n')
+    moved.write_text('extends = "thick.toml"\n[jets]\nmax_force_n = 0.3\n'
+                     '[base]\nposition_in_tracker_m = [0.1, 0, 0.2]\n')
     parameters, warnings = compare("--params", str(elsewhere), "--profile", str(moved))
     assert parameters["uncalibrated"] == []
 
